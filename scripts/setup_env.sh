@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# Create (or reuse) the project's virtualenv, keyed by the hash of requirements.txt.
+# Prints the venv's python path on the last line of stdout.
+# Reused while the pins are unchanged, so CI and repeated set-ups take seconds.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+key="$(sha256sum "$root/requirements.txt" | cut -c1-16)"
+venv="${LITEGS_VENV_ROOT:-$HOME/.cache/litegs-venvs}/$key"
+if [ ! -x "$venv/bin/python" ] || [ ! -f "$venv/.complete" ]; then
+  echo "setup_env: creating virtualenv $venv (first time for these pins, ~2 min)" >&2
+  rm -rf "$venv"
+  python3 -m venv "$venv"
+  "$venv/bin/python" -m pip install -q --disable-pip-version-check -r "$root/requirements.txt" >&2
+  touch "$venv/.complete"
+else
+  echo "setup_env: reusing virtualenv $venv" >&2
+fi
+echo "$venv/bin/python"

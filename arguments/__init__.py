@@ -1,0 +1,131 @@
+"""Configuration dataclasses and the one helper that turns their fields into argparse options and back.
+
+Each group is a frozen dataclass with typed fields and a default; the CLI is generated from the fields
+(`add_config_args`) and read back explicitly (`config_from_args`). Resolved configs are saved as JSON.
+Optimisation and densification configs live next to the code that uses them
+(`scene.optim.OptimConfig`, `scene.densify.DensifyConfig`) and are exposed here the same way.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import typing
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+
+def _flag(short: str | None = None, help: str = "", choices: tuple | None = None) -> dict:
+    return {"short": short, "help": help, "choices": choices}
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Where the data and the outputs are, and how the scene is loaded."""
+
+    source_path: str = field(default="", metadata=_flag("-s", "dataset directory (Blender or COLMAP layout)"))
+    model_path: str = field(default="", metadata=_flag("-m", "output directory (default output/<scene name>)"))
+    images: str = field(default="images", metadata=_flag("-i", "COLMAP image folder name"))
+    resolution: int = field(default=-1, metadata=_flag("-r", "1/2/4/8 = downscale factor, other >0 = target width, -1 = as is"))
+    white_background: bool = field(default=False, metadata=_flag("-w", "composite RGBA on white (Blender)"))
+    eval: bool = field(default=False, metadata=_flag(None, "hold out test views (COLMAP: every 8th; Blender: transforms_test)"))
+    sh_degree: int = field(default=3, metadata=_flag(None, "maximum spherical-harmonics degree"))
+    num_random_points: int = field(default=10_000, metadata=_flag(None, "random initial points for synthetic (Blender) scenes"))
+    device: str = field(default="cpu", metadata=_flag(None, "torch device", ("cpu", "cuda")))
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Rasterizer settings."""
+
+    tile_size: int = field(default=16, metadata=_flag(None, "rasterizer tile size in pixels"))
+
+
+@dataclass(frozen=True)
+class ActiveConfig:
+    """Active view selection: which selector, the acquisition schedule and the Fisher oracle."""
+
+    method: str = field(default="", metadata=_flag(None, "view selector; empty = train on all training views"))
+    eps: float = field(default=0.1, metadata=_flag(None, "lite_gs/ssg accuracy parameter, in (0, 1)"))
+    num_init_views: int = field(default=2, metadata=_flag(None, "seed views (farthest-point sampling from view 0)"))
+    init_views: tuple[int, ...] = field(default=(), metadata=_flag(None, "explicit seed view ids (overrides --num_init_views)"))
+    views_per_step: int = field(default=3, metadata=_flag(None, "K: views added per acquisition step"))
+    max_views: int = field(default=11, metadata=_flag(None, "view budget (training views at the end)"))
+    iters_per_view: int = field(default=100, metadata=_flag(None, "stage length = iters_per_view x current #views"))
+    stage_reset: bool = field(default=False, metadata=_flag(None, "restart each stage from the initial point cloud (default: continue)"))
+    sigma: float = field(default=1.0, metadata=_flag(None, "pixel noise std in the Fisher model H = J^T J / sigma^2"))
+    delta_rel: float = field(default=1e-6, metadata=_flag(None, "relative ridge: delta_i = delta_rel * max diag of the prior block"))
+    delta_abs: float = field(default=1e-8, metadata=_flag(None, "absolute ridge floor added to every prior block"))
+    fisher_params: str = field(default="default", metadata=_flag(None, "Fisher parameter groups", ("default", "full_sh")))
+    fisher_mode: str = field(default="cached", metadata=_flag(None, "cached: keep view blocks per stage; streaming: recompute", ("cached", "streaming")))
+    fisher_cache_mb: int = field(default=0, metadata=_flag(None, "cache bound in MB (0 = a quarter of available RAM)"))
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """The training loop: length, seed, logging and checkpoints."""
+
+    iterations: int = field(default=3_000, metadata=_flag(None, "total training iterations"))
+    seed: int = field(default=0, metadata=_flag(None, "random seed (same seed => same views and metrics on CPU)"))
+    test_iterations: tuple[int, ...] = field(default=(), metadata=_flag(None, "iterations at which to report test PSNR (end always)"))
+    save_iterations: tuple[int, ...] = field(default=(), metadata=_flag(None, "iterations at which to save a PLY (end always)"))
+    checkpoint_iterations: tuple[int, ...] = field(default=(), metadata=_flag(None, "extra checkpoint iterations (stages always checkpoint)"))
+    quiet: bool = field(default=False, metadata=_flag("-q", "no progress bar"))
+    resume: bool = field(default=False, metadata=_flag(None, "continue from the newest checkpoint (also automatic)"))
+    overwrite: bool = field(default=False, metadata=_flag(None, "delete a finished or partial run in --model_path and start over"))
+
+
+def _base_type(tp: Any) -> Any:
+    """The element type of `tuple[X, ...]`, else the type itself."""
+    if typing.get_origin(tp) is tuple:
+        return typing.get_args(tp)[0]
+    return tp
+
+
+def add_config_args(parser: argparse.ArgumentParser, cls: type, title: str | None = None,
+                    defaults: dict[str, Any] | None = None) -> None:
+    """Add one option per field of dataclass `cls` (as an argument group named `title`)."""
+    group = parser.add_argument_group(title or cls.__name__, (cls.__doc__ or "").strip().splitlines()[0])
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        meta = f.metadata or {}
+        names = [f"--{f.name}"] + ([meta["short"]] if meta.get("short") else [])
+        default = (defaults or {}).get(f.name, f.default)
+        tp = hints[f.name]
+        kwargs: dict[str, Any] = {"help": f"{meta.get('help', '')} (default: {default!r})", "default": default}
+        if tp is bool:
+            kwargs["action"] = argparse.BooleanOptionalAction
+        elif typing.get_origin(tp) is tuple:
+            kwargs.update(type=_base_type(tp), nargs="*")
+        else:
+            kwargs["type"] = tp
+        if meta.get("choices"):
+            kwargs["choices"] = meta["choices"]
+        group.add_argument(*names, dest=f.name, **kwargs)
+
+
+def config_from_args(cls: type[T], ns: argparse.Namespace) -> T:
+    """Build dataclass `cls` from the matching attributes of an argparse namespace."""
+    hints = typing.get_type_hints(cls)
+    values = {}
+    for f in dataclasses.fields(cls):
+        value = getattr(ns, f.name)
+        values[f.name] = tuple(value) if typing.get_origin(hints[f.name]) is tuple else value
+    return cls(**values)
+
+
+def config_to_dict(cfg: Any) -> dict[str, Any]:
+    """A JSON-ready dict of a config dataclass (tuples become lists)."""
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(cfg).items()}
+
+
+def config_from_dict(cls: type[T], values: dict[str, Any]) -> T:
+    """Inverse of `config_to_dict`, ignoring unknown keys (older/newer config files)."""
+    hints = typing.get_type_hints(cls)
+    kwargs = {}
+    for f in dataclasses.fields(cls):
+        if f.name in values:
+            v = values[f.name]
+            kwargs[f.name] = tuple(v) if typing.get_origin(hints[f.name]) is tuple else v
+    return cls(**kwargs)

@@ -1,0 +1,93 @@
+"""The model directory's run bookkeeping: status file, config, and atomic per-stage checkpoints."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from utils.errors import UserError
+from utils.io import save_torch, write_json
+
+CHECKPOINT_FORMAT_VERSION = 1
+_CKPT_RE = re.compile(r"^chkpnt_(\d+)\.pt$")
+KEEP_CHECKPOINTS = 2  # the newest two: a fallback if the newest turns out unreadable
+
+
+class RunDirectory:
+    """One model directory: `run_status.json` ("running" / "complete"), `cfg_args`, `checkpoints/`."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+
+    @property
+    def status_file(self) -> Path:
+        return self.path / "run_status.json"
+
+    def status(self) -> dict[str, Any] | None:
+        """The parsed status file, or None when there is none (or it is unreadable)."""
+        try:
+            return json.loads(self.status_file.read_text())
+        except (OSError, ValueError):
+            return None
+
+    def is_complete(self) -> bool:
+        status = self.status()
+        return bool(status) and status.get("status") == "complete"
+
+    def clear(self) -> None:
+        """Delete a previous run in this directory (only if it looks like one of ours)."""
+        if not self.path.exists():
+            return
+        if not ((self.path / "cfg_args").exists() or self.status_file.exists()):
+            raise UserError(f"--overwrite refused: {self.path} is not a model directory of this project "
+                            "(no cfg_args / run_status.json); pick another -m/--model_path")
+        shutil.rmtree(self.path)
+
+    def start(self, config: dict[str, Any]) -> None:
+        """Create the directory and mark the run as running; fails with one line if it is not writable."""
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+            write_json(self.status_file, {"status": "running"})
+        except OSError as exc:
+            raise UserError(f"cannot write to model path {self.path} ({exc.strerror}); "
+                            "choose a writable -m/--model_path") from None
+        write_json(self.path / "cfg_args", config)
+
+    def finish(self, summary: dict[str, Any]) -> None:
+        write_json(self.status_file, {"status": "complete", **summary})
+
+    def _checkpoints(self) -> list[tuple[int, Path]]:
+        folder = self.path / "checkpoints"
+        if not folder.is_dir():
+            return []
+        found = [(int(m.group(1)), p) for p in folder.iterdir() if (m := _CKPT_RE.match(p.name))]
+        return sorted(found)
+
+    def save_checkpoint(self, state: dict[str, Any]) -> Path:
+        """Write `checkpoints/chkpnt_<iteration>.pt` atomically and drop all but the newest few."""
+        path = self.path / "checkpoints" / f"chkpnt_{state['iteration']:07d}.pt"
+        save_torch(path, {"format_version": CHECKPOINT_FORMAT_VERSION, **state})
+        for _, old in self._checkpoints()[:-KEEP_CHECKPOINTS]:
+            old.unlink(missing_ok=True)
+        return path
+
+    def latest_checkpoint(self) -> dict[str, Any] | None:
+        """The newest checkpoint, or None. A corrupt one is an error naming the file and the fix."""
+        ckpts = self._checkpoints()
+        if not ckpts:
+            return None
+        path = ckpts[-1][1]
+        try:
+            ckpt = torch.load(path, map_location="cpu", weights_only=False)
+        except Exception:
+            raise UserError(f"checkpoint {path} is corrupt or truncated; delete it to resume from the previous one, "
+                            "or pass --overwrite to start again") from None
+        if not isinstance(ckpt, dict) or ckpt.get("format_version") != CHECKPOINT_FORMAT_VERSION:
+            raise UserError(f"checkpoint {path} has an unknown format (expected version {CHECKPOINT_FORMAT_VERSION}); "
+                            "pass --overwrite to start again")
+        return ckpt

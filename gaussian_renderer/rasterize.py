@@ -1,0 +1,336 @@
+"""Tile-binned, depth-chunked alpha compositing of 2D Gaussians, with a recomputing backward pass.
+
+The shipped fast path. Gaussians are binned into square tiles by their 3-sigma box, sorted by depth per tile, and
+every tile is processed at once, `chunk_size` Gaussians deep at a time: the working set is
+[tiles, tile_size^2, chunk_size], never pixels x all Gaussians. Nothing per pair is stored for the backward pass:
+it replays the chunks front to back and gets every pair's d colour / d alpha in closed form from the running
+prefix colour and the saved final colour (the CUDA 3DGS kernel does the same back to front).
+
+The same per-pair replay gives the Fisher-ready partials: `attribute_gram` accumulates, per Gaussian, the Gram
+matrix of d pixel colour / d 2D attributes over all pixels and channels, and `pixel_attribute_partials` returns the
+packed per-pair Jacobians (small images; used by tests).
+
+2D attributes of Gaussian i (A = 6 + D): mean x, mean y, conic a, b, c, opacity, colour[D].
+Conventions: pixel (x, y) has its centre at (x + 0.5, y + 0.5); conic (a, b, c) is [[a, b], [b, c]].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterator
+
+import torch
+
+from gaussian_renderer.settings import RasterSettings
+
+NUM_GEOMETRY_ATTRIBUTES = 6  # mean x, mean y, conic a, b, c, opacity
+
+
+@dataclass
+class TileBins:
+    """Per-tile, depth-sorted Gaussian lists and the pixels of each tile."""
+
+    lists: torch.Tensor  # [T, L] Gaussian ids, front to back, -1 = padding
+    pixels: torch.Tensor  # [T, P, 2] pixel centres (P = tile_size^2)
+    pixel_valid: torch.Tensor  # [T, P] bool: inside the image
+    pixel_index: torch.Tensor  # [T, P] flat index y * W + x (clamped for invalid pixels)
+
+
+def tile_ranges(means2d: torch.Tensor, radii: torch.Tensor, width: int, height: int,
+                tile_size: int) -> tuple[torch.Tensor, ...]:
+    """Inclusive tile rectangle (x0, x1, y0, y1) of each Gaussian's 3-sigma box, clamped to the image. [N] each"""
+    tiles_x, tiles_y = -(-width // tile_size), -(-height // tile_size)
+    r = radii.to(means2d.dtype)
+    x0 = torch.floor((means2d[:, 0] - r) / tile_size).clamp(0, tiles_x - 1).long()
+    x1 = torch.floor((means2d[:, 0] + r) / tile_size).clamp(0, tiles_x - 1).long()
+    y0 = torch.floor((means2d[:, 1] - r) / tile_size).clamp(0, tiles_y - 1).long()
+    y1 = torch.floor((means2d[:, 1] + r) / tile_size).clamp(0, tiles_y - 1).long()
+    return x0, x1, y0, y1
+
+
+def bin_gaussians(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor, width: int, height: int,
+                  tile_size: int) -> TileBins:
+    """Build depth-sorted per-tile lists from the (tile, Gaussian) pairs of each Gaussian's tile rectangle."""
+    device = means2d.device
+    tiles_x, tiles_y = -(-width // tile_size), -(-height // tile_size)
+    num_tiles = tiles_x * tiles_y
+    with torch.no_grad():
+        ids = torch.nonzero(radii > 0).squeeze(1)  # [n]
+        x0, x1, y0, y1 = tile_ranges(means2d.detach()[ids], radii[ids], width, height, tile_size)
+        nx, ny = x1 - x0 + 1, y1 - y0 + 1
+        counts = nx * ny  # [n]
+        total = int(counts.sum())
+        gid = torch.repeat_interleave(ids, counts)  # [M]
+        starts = torch.cumsum(counts, 0) - counts
+        local = torch.arange(total, device=device) - torch.repeat_interleave(starts, counts)
+        nx_rep = torch.repeat_interleave(nx, counts)
+        tile = ((torch.repeat_interleave(y0, counts) + local // nx_rep) * tiles_x
+                + torch.repeat_interleave(x0, counts) + local % nx_rep)
+        rank = torch.empty_like(radii)
+        rank[torch.argsort(depths.detach(), stable=True)] = torch.arange(len(radii), device=device)
+        order = torch.argsort(tile * max(len(radii), 1) + rank[gid])
+        tile, gid = tile[order], gid[order]
+        per_tile = torch.bincount(tile, minlength=num_tiles)
+        length = max(int(per_tile.max()) if total else 0, 1)
+        pos = torch.arange(total, device=device) - (torch.cumsum(per_tile, 0) - per_tile)[tile]
+        lists = torch.full((num_tiles, length), -1, dtype=torch.long, device=device)
+        lists[tile, pos] = gid
+        t = torch.arange(num_tiles, device=device)
+        p = torch.arange(tile_size * tile_size, device=device)
+        px = (t % tiles_x)[:, None] * tile_size + (p % tile_size)[None, :]  # [T, P]
+        py = (t // tiles_x)[:, None] * tile_size + (p // tile_size)[None, :]
+        valid = (px < width) & (py < height)
+        pixels = torch.stack([px, py], dim=-1).to(means2d.dtype) + 0.5
+        index = torch.where(valid, py * width + px, torch.zeros_like(px))
+    return TileBins(lists, pixels, valid, index)
+
+
+@dataclass
+class ChunkPairs:
+    """Everything about the (pixel, Gaussian) pairs of one depth chunk. Shapes [T, P, c] unless noted."""
+
+    ids: torch.Tensor  # [T, c] Gaussian ids (-1 = padding)
+    alpha: torch.Tensor  # effective alpha (0 where the pair does not contribute)
+    unclamped: torch.Tensor  # bool: contributes and alpha < alpha_max (so alpha has a derivative)
+    gauss: torch.Tensor  # exp(power)
+    dx: torch.Tensor  # pixel centre - mean, x
+    dy: torch.Tensor
+    trans: torch.Tensor  # transmittance in front of the Gaussian
+    weight: torch.Tensor  # alpha * trans
+    prefix: torch.Tensor  # [T, P, c, D] colour accumulated up to and including this Gaussian
+
+
+def _iterate_chunks(bins: TileBins, means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
+                    colors: torch.Tensor, settings: RasterSettings) -> Iterator[ChunkPairs]:
+    """Replay the front-to-back compositing chunk by chunk (3DGS rules: alpha skip, clamp, early stop)."""
+    num_tiles, num_pixels = bins.pixel_valid.shape
+    dtype, device = means2d.dtype, means2d.device
+    trans = torch.ones(num_tiles, num_pixels, dtype=dtype, device=device)  # real transmittance
+    trans_test = trans.clone()  # transmittance with every alpha, for the early-stop test (monotone)
+    prefix = torch.zeros(num_tiles, num_pixels, colors.shape[1], dtype=dtype, device=device)
+    px, py = bins.pixels[..., 0:1], bins.pixels[..., 1:2]  # [T, P, 1]
+    for start in range(0, bins.lists.shape[1], settings.chunk_size):
+        ids = bins.lists[:, start:start + settings.chunk_size]  # [T, c]
+        if not bool((ids >= 0).any()) or not bool((trans_test >= settings.transmittance_min).any()):
+            break
+        safe = ids.clamp_min(0)
+        mean, conic, opacity = means2d[safe], conics[safe], opacities[safe]  # [T,c,2], [T,c,3], [T,c]
+        dx = px - mean[:, None, :, 0]  # [T, P, c]
+        dy = py - mean[:, None, :, 1]
+        power = (-0.5 * (conic[:, None, :, 0] * dx * dx + conic[:, None, :, 2] * dy * dy)
+                 - conic[:, None, :, 1] * dx * dy)
+        gauss = torch.exp(power)
+        raw = opacity[:, None, :] * gauss
+        alpha = raw.clamp_max(settings.alpha_max)
+        live = ((ids >= 0)[:, None, :] & (power <= 0) & (alpha >= settings.alpha_min)
+                & bins.pixel_valid[:, :, None])
+        alpha = torch.where(live, alpha, torch.zeros_like(alpha))
+        cum_test = trans_test[:, :, None] * torch.cumprod(1 - alpha, dim=-1)
+        keep = cum_test >= settings.transmittance_min
+        alpha = torch.where(keep, alpha, torch.zeros_like(alpha))
+        cum = torch.cumprod(1 - alpha, dim=-1)
+        front = trans[:, :, None] * torch.cat([torch.ones_like(cum[..., :1]), cum[..., :-1]], dim=-1)
+        weight = alpha * front
+        chunk_prefix = prefix[:, :, None, :] + torch.cumsum(weight[..., None] * colors[safe][:, None, :, :], dim=2)
+        yield ChunkPairs(ids, alpha, (alpha > 0) & (raw < settings.alpha_max), gauss, dx, dy, front, weight,
+                         chunk_prefix)
+        prefix = chunk_prefix[:, :, -1, :]
+        trans = trans * cum[..., -1]
+        trans_test = cum_test[..., -1]
+
+
+def _to_image(values: torch.Tensor, bins: TileBins, width: int, height: int) -> torch.Tensor:
+    """Scatter per-tile pixel values [T, P, D] to an image [D, H, W]."""
+    d = values.shape[-1]
+    out = values.new_zeros(height * width, d)
+    out[bins.pixel_index[bins.pixel_valid]] = values[bins.pixel_valid]
+    return out.T.reshape(d, height, width)
+
+
+def _from_image(image: torch.Tensor, bins: TileBins) -> torch.Tensor:
+    """Gather an image [D, H, W] into per-tile pixels [T, P, D] (zeros outside the image)."""
+    flat = image.reshape(image.shape[0], -1).T  # [H*W, D]
+    return torch.where(bins.pixel_valid[..., None], flat[bins.pixel_index], torch.zeros_like(flat[:1]))
+
+
+def _composite(bins, means2d, conics, opacities, colors, background, settings):
+    """Forward compositing; returns final per-tile colour [T,P,D] (background included) and transmittance [T,P]."""
+    num_tiles, num_pixels = bins.pixel_valid.shape
+    trans = torch.ones(num_tiles, num_pixels, dtype=means2d.dtype, device=means2d.device)
+    color = torch.zeros(num_tiles, num_pixels, colors.shape[1], dtype=means2d.dtype, device=means2d.device)
+    for chunk in _iterate_chunks(bins, means2d, conics, opacities, colors, settings):
+        color = chunk.prefix[:, :, -1, :]
+        trans = chunk.trans[:, :, -1] * (1 - chunk.alpha[:, :, -1])
+    return color + trans[..., None] * background, trans
+
+
+def _alpha_partials(chunk: ChunkPairs, conics: torch.Tensor) -> torch.Tensor:
+    """d alpha / d (mean x, mean y, conic a, b, c, opacity) per pair, zero where alpha has no derivative. [T,P,c,6]"""
+    conic = conics[chunk.ids.clamp_min(0)][:, None, :, :]  # [T, 1, c, 3]
+    a = torch.where(chunk.unclamped, chunk.alpha, torch.zeros_like(chunk.alpha))
+    dx, dy = chunk.dx, chunk.dy
+    return torch.stack([
+        a * (conic[..., 0] * dx + conic[..., 1] * dy),
+        a * (conic[..., 1] * dx + conic[..., 2] * dy),
+        -0.5 * a * dx * dx,
+        -a * dx * dy,
+        -0.5 * a * dy * dy,
+        torch.where(chunk.unclamped, chunk.gauss, torch.zeros_like(chunk.gauss)),
+    ], dim=-1)
+
+
+def _color_alpha_partials(chunk: ChunkPairs, colors: torch.Tensor, final_color: torch.Tensor) -> torch.Tensor:
+    """d pixel colour / d alpha_i = c_i T_i - (colour behind i) / (1 - alpha_i). [T, P, c, D]"""
+    behind = final_color[:, :, None, :] - chunk.prefix
+    return (colors[chunk.ids.clamp_min(0)][:, None, :, :] * chunk.trans[..., None]
+            - behind / (1 - chunk.alpha)[..., None])
+
+
+def _scatter_rows(values: torch.Tensor, ids: torch.Tensor, n: int) -> torch.Tensor:
+    """Sum rows [T, c, ...] into [n, ...] by Gaussian id, dropping the -1 padding."""
+    flat_ids = ids.reshape(-1)
+    flat = values.reshape(flat_ids.shape[0], -1)
+    keep = flat_ids >= 0
+    out = flat.new_zeros(n, flat.shape[1])
+    out.index_add_(0, flat_ids[keep], flat[keep])
+    return out.reshape(n, *values.shape[2:])
+
+
+class _RasterizeFunction(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, means2d, conics, opacities, colors, background, bins, width, height, settings):
+        final_color, trans = _composite(bins, means2d, conics, opacities, colors, background, settings)
+        ctx.save_for_backward(means2d, conics, opacities, colors, background, final_color, trans)
+        ctx.bins, ctx.settings = bins, settings
+        return _to_image(final_color, bins, width, height), _to_image((1 - trans)[..., None], bins, width, height)[0]
+
+    @staticmethod
+    def backward(ctx, grad_image, grad_alpha):
+        means2d, conics, opacities, colors, background, final_color, trans_final = ctx.saved_tensors
+        bins, settings = ctx.bins, ctx.settings
+        n = means2d.shape[0]
+        g_color = _from_image(grad_image, bins)  # [T, P, D]
+        g_trans = -_from_image(grad_alpha[None], bins)[..., 0] if grad_alpha is not None else None  # dL/dT_final
+        grad_geom = means2d.new_zeros(n, NUM_GEOMETRY_ATTRIBUTES)
+        grad_colors = torch.zeros_like(colors)
+        with torch.no_grad():
+            for chunk in _iterate_chunks(bins, means2d, conics, opacities, colors, settings):
+                dc_dalpha = _color_alpha_partials(chunk, colors, final_color)  # [T, P, c, D]
+                dl_dalpha = (dc_dalpha * g_color[:, :, None, :]).sum(-1)  # [T, P, c]
+                if g_trans is not None:
+                    dl_dalpha = dl_dalpha - (g_trans * trans_final)[:, :, None] / (1 - chunk.alpha)
+                per_pair = dl_dalpha[..., None] * _alpha_partials(chunk, conics)  # [T, P, c, 6]
+                grad_geom += _scatter_rows(per_pair.sum(1), chunk.ids, n)
+                grad_colors += _scatter_rows(torch.einsum("tpc,tpd->tcd", chunk.weight, g_color), chunk.ids, n)
+        grad_bg = (g_color * trans_final[..., None]).sum((0, 1))
+        return (grad_geom[:, 0:2], grad_geom[:, 2:5], grad_geom[:, 5], grad_colors, grad_bg,
+                None, None, None, None)
+
+
+def _check_inputs(means2d, conics, opacities, colors, depths, radii, background) -> None:
+    n = means2d.shape[0]
+    assert means2d.shape == (n, 2), f"means2d must be [N,2], got {tuple(means2d.shape)}"
+    assert conics.shape == (n, 3), f"conics must be [N,3], got {tuple(conics.shape)}"
+    assert opacities.shape == (n,), f"opacities must be [N], got {tuple(opacities.shape)}"
+    assert colors.ndim == 2 and colors.shape[0] == n, f"colors must be [N,D], got {tuple(colors.shape)}"
+    assert depths.shape == (n,) and radii.shape == (n,), f"depths/radii must be [N], got {depths.shape}/{radii.shape}"
+    assert background.shape == (colors.shape[1],), f"background must be [D], got {tuple(background.shape)}"
+
+
+def rasterize(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, colors: torch.Tensor,
+              depths: torch.Tensor, radii: torch.Tensor, width: int, height: int, background: torch.Tensor,
+              settings: RasterSettings | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Alpha-composite projected Gaussians front to back (differentiable; fast path).
+
+    Args:
+        means2d: screen centres in pixels. [N, 2]
+        conics: inverse 2D covariances (a, b, c). [N, 3]
+        opacities: activated opacities. [N]
+        colors: per-Gaussian colours. [N, D]
+        depths: camera-space depth, for sorting. [N]
+        radii: 3-sigma radius in pixels, 0 = culled. [N]
+        background: colour behind everything. [D]
+    Returns:
+        image [D, H, W] and alpha [H, W] (1 - final transmittance).
+    """
+    settings = settings or RasterSettings()
+    _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
+    bins = bin_gaussians(means2d, radii, depths, width, height, settings.tile_size)
+    return _RasterizeFunction.apply(means2d, conics, opacities, colors, background, bins, width, height, settings)
+
+
+@torch.no_grad()
+def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, colors: torch.Tensor,
+                   depths: torch.Tensor, radii: torch.Tensor, width: int, height: int, background: torch.Tensor,
+                   settings: RasterSettings | None = None) -> torch.Tensor:
+    """Per-Gaussian Gram matrix of the pixel-colour partials w.r.t. the 2D attributes.
+
+    G_i = sum_pixels sum_channels (dC_pc / da_i)(dC_pc / da_i)^T, a_i = (mean x, y, conic a, b, c, opacity, colour).
+    Per pair the Jacobian is [u v^T | w I] with u = dC/dalpha [D], v = dalpha/d(geometry) [6], w = alpha T, so the
+    Gram is [[|u|^2 v v^T, w v u^T], [w u v^T, w^2 I]]; it is summed over a tile's pixels before the scatter.
+
+    Returns:
+        float64 Gram matrices. [N, A, A], A = 6 + D
+    """
+    settings = settings or RasterSettings()
+    _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
+    n, d = colors.shape
+    geo = NUM_GEOMETRY_ATTRIBUTES
+    bins = bin_gaussians(means2d, radii, depths, width, height, settings.tile_size)
+    final_color, _ = _composite(bins, means2d, conics, opacities, colors, background, settings)
+    gram = torch.zeros(n, geo + d, geo + d, dtype=torch.float64, device=means2d.device)
+    for chunk in _iterate_chunks(bins, means2d, conics, opacities, colors, settings):
+        u = _color_alpha_partials(chunk, colors, final_color).double()  # [T, P, c, D]
+        v = _alpha_partials(chunk, conics).double()  # [T, P, c, 6]
+        w = chunk.weight.double()  # [T, P, c]
+        t, p, c = w.shape
+        uu = (u * u).sum(-1)  # [T, P, c]
+        v_t = v.permute(0, 2, 1, 3).reshape(t * c, p, geo)  # [T*c, P, 6]
+        vv = torch.bmm((uu.permute(0, 2, 1).reshape(t * c, p, 1) * v_t).transpose(1, 2), v_t)  # [T*c, 6, 6]
+        wu = (w[..., None] * u).permute(0, 2, 1, 3).reshape(t * c, p, d)
+        vu = torch.bmm(v_t.transpose(1, 2), wu)  # [T*c, 6, D]
+        ww = (w * w).sum(1).reshape(t * c)  # [T*c]
+        block = torch.zeros(t * c, geo + d, geo + d, dtype=torch.float64, device=gram.device)
+        block[:, :geo, :geo] = vv
+        block[:, :geo, geo:] = vu
+        block[:, geo:, :geo] = vu.transpose(1, 2)
+        block[:, geo:, geo:] = ww[:, None, None] * torch.eye(d, dtype=torch.float64, device=gram.device)
+        gram += _scatter_rows(block.reshape(t, c, geo + d, geo + d), chunk.ids, n)
+    return gram
+
+
+@dataclass
+class PairPartials:
+    """Packed per-(pixel, Gaussian) Jacobians of the pixel colour w.r.t. the Gaussian's 2D attributes."""
+
+    pixel_ids: torch.Tensor  # [M] flat pixel index y * W + x
+    gaussian_ids: torch.Tensor  # [M]
+    jac: torch.Tensor  # [M, D, A]
+
+
+@torch.no_grad()
+def pixel_attribute_partials(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
+                             colors: torch.Tensor, depths: torch.Tensor, radii: torch.Tensor, width: int,
+                             height: int, background: torch.Tensor,
+                             settings: RasterSettings | None = None) -> PairPartials:
+    """Closed-form d colour / d 2D attributes for every contributing pair (no autograd). Small images only."""
+    settings = settings or RasterSettings()
+    _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
+    d = colors.shape[1]
+    bins = bin_gaussians(means2d, radii, depths, width, height, settings.tile_size)
+    final_color, _ = _composite(bins, means2d, conics, opacities, colors, background, settings)
+    pix, gid, jacs = [], [], []
+    eye = torch.eye(d, dtype=means2d.dtype, device=means2d.device)
+    for chunk in _iterate_chunks(bins, means2d, conics, opacities, colors, settings):
+        u = _color_alpha_partials(chunk, colors, final_color)  # [T, P, c, D]
+        v = _alpha_partials(chunk, conics)  # [T, P, c, 6]
+        jac = torch.cat([u[..., :, None] * v[..., None, :],
+                         chunk.weight[..., None, None] * eye], dim=-1)  # [T, P, c, D, A]
+        mask = chunk.alpha > 0
+        t_idx, p_idx, c_idx = torch.nonzero(mask, as_tuple=True)
+        pix.append(bins.pixel_index[t_idx, p_idx])
+        gid.append(chunk.ids[t_idx, c_idx])
+        jacs.append(jac[mask])
+    if not jacs:
+        empty = torch.zeros(0, dtype=torch.long, device=means2d.device)
+        return PairPartials(empty, empty, means2d.new_zeros(0, d, NUM_GEOMETRY_ATTRIBUTES + d))
+    return PairPartials(torch.cat(pix), torch.cat(gid), torch.cat(jacs))

@@ -86,56 +86,57 @@ def bin_gaussians(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tens
 
 @dataclass
 class ChunkPairs:
-    """Everything about the (pixel, Gaussian) pairs of one depth chunk. Shapes [T, P, c] unless noted."""
+    """The (pixel, Gaussian) pairs of one depth chunk of the still-active tiles. Shapes [Ta, P, c] unless noted."""
 
-    ids: torch.Tensor  # [T, c] Gaussian ids (-1 = padding)
+    tiles: torch.Tensor  # [Ta] indices of the tiles in this chunk
+    ids: torch.Tensor  # [Ta, c] Gaussian ids (-1 = padding)
     alpha: torch.Tensor  # effective alpha (0 where the pair does not contribute)
     unclamped: torch.Tensor  # bool: contributes and alpha < alpha_max (so alpha has a derivative)
     gauss: torch.Tensor  # exp(power)
     dx: torch.Tensor  # pixel centre - mean, x
     dy: torch.Tensor
     trans: torch.Tensor  # transmittance in front of the Gaussian
-    weight: torch.Tensor  # alpha * trans
-    prefix: torch.Tensor  # [T, P, c, D] colour accumulated up to and including this Gaussian
+    weight: torch.Tensor  # alpha * trans: the pair's share of the pixel colour
 
 
 def _iterate_chunks(bins: TileBins, means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
-                    colors: torch.Tensor, settings: RasterSettings) -> Iterator[ChunkPairs]:
-    """Replay the front-to-back compositing chunk by chunk (3DGS rules: alpha skip, clamp, early stop)."""
+                    settings: RasterSettings) -> Iterator[ChunkPairs]:
+    """Replay the front-to-back compositing chunk by chunk (3DGS rules: alpha skip, clamp, early stop).
+
+    Only tiles that still have Gaussians at this depth and an unfinished pixel take part in a chunk, so short
+    tile lists and saturated tiles cost nothing.
+    """
     num_tiles, num_pixels = bins.pixel_valid.shape
     dtype, device = means2d.dtype, means2d.device
     trans = torch.ones(num_tiles, num_pixels, dtype=dtype, device=device)  # real transmittance
     trans_test = trans.clone()  # transmittance with every alpha, for the early-stop test (monotone)
-    prefix = torch.zeros(num_tiles, num_pixels, colors.shape[1], dtype=dtype, device=device)
-    px, py = bins.pixels[..., 0:1], bins.pixels[..., 1:2]  # [T, P, 1]
     for start in range(0, bins.lists.shape[1], settings.chunk_size):
-        ids = bins.lists[:, start:start + settings.chunk_size]  # [T, c]
-        if not bool((ids >= 0).any()) or not bool((trans_test >= settings.transmittance_min).any()):
+        active = (bins.lists[:, start] >= 0) & (trans_test >= settings.transmittance_min).any(dim=1)
+        tiles = torch.nonzero(active).squeeze(1)
+        if tiles.numel() == 0:
             break
+        ids = bins.lists[tiles, start:start + settings.chunk_size]  # [Ta, c]
         safe = ids.clamp_min(0)
-        mean, conic, opacity = means2d[safe], conics[safe], opacities[safe]  # [T,c,2], [T,c,3], [T,c]
-        dx = px - mean[:, None, :, 0]  # [T, P, c]
-        dy = py - mean[:, None, :, 1]
+        mean, conic, opacity = means2d[safe], conics[safe], opacities[safe]  # [Ta,c,2], [Ta,c,3], [Ta,c]
+        pixels = bins.pixels[tiles]
+        dx = pixels[..., 0:1] - mean[:, None, :, 0]  # [Ta, P, c]
+        dy = pixels[..., 1:2] - mean[:, None, :, 1]
         power = (-0.5 * (conic[:, None, :, 0] * dx * dx + conic[:, None, :, 2] * dy * dy)
                  - conic[:, None, :, 1] * dx * dy)
         gauss = torch.exp(power)
         raw = opacity[:, None, :] * gauss
         alpha = raw.clamp_max(settings.alpha_max)
         live = ((ids >= 0)[:, None, :] & (power <= 0) & (alpha >= settings.alpha_min)
-                & bins.pixel_valid[:, :, None])
+                & bins.pixel_valid[tiles][:, :, None])
         alpha = torch.where(live, alpha, torch.zeros_like(alpha))
-        cum_test = trans_test[:, :, None] * torch.cumprod(1 - alpha, dim=-1)
-        keep = cum_test >= settings.transmittance_min
-        alpha = torch.where(keep, alpha, torch.zeros_like(alpha))
+        cum_test = trans_test[tiles][:, :, None] * torch.cumprod(1 - alpha, dim=-1)
+        alpha = torch.where(cum_test >= settings.transmittance_min, alpha, torch.zeros_like(alpha))
         cum = torch.cumprod(1 - alpha, dim=-1)
-        front = trans[:, :, None] * torch.cat([torch.ones_like(cum[..., :1]), cum[..., :-1]], dim=-1)
-        weight = alpha * front
-        chunk_prefix = prefix[:, :, None, :] + torch.cumsum(weight[..., None] * colors[safe][:, None, :, :], dim=2)
-        yield ChunkPairs(ids, alpha, (alpha > 0) & (raw < settings.alpha_max), gauss, dx, dy, front, weight,
-                         chunk_prefix)
-        prefix = chunk_prefix[:, :, -1, :]
-        trans = trans * cum[..., -1]
-        trans_test = cum_test[..., -1]
+        front = trans[tiles][:, :, None] * torch.cat([torch.ones_like(cum[..., :1]), cum[..., :-1]], dim=-1)
+        yield ChunkPairs(tiles, ids, alpha, (alpha > 0) & (raw < settings.alpha_max), gauss, dx, dy, front,
+                         alpha * front)
+        trans[tiles] = trans[tiles] * cum[..., -1]
+        trans_test[tiles] = cum_test[..., -1]
 
 
 def _to_image(values: torch.Tensor, bins: TileBins, width: int, height: int) -> torch.Tensor:
@@ -157,15 +158,15 @@ def _composite(bins, means2d, conics, opacities, colors, background, settings):
     num_tiles, num_pixels = bins.pixel_valid.shape
     trans = torch.ones(num_tiles, num_pixels, dtype=means2d.dtype, device=means2d.device)
     color = torch.zeros(num_tiles, num_pixels, colors.shape[1], dtype=means2d.dtype, device=means2d.device)
-    for chunk in _iterate_chunks(bins, means2d, conics, opacities, colors, settings):
-        color = chunk.prefix[:, :, -1, :]
-        trans = chunk.trans[:, :, -1] * (1 - chunk.alpha[:, :, -1])
+    for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
+        color[chunk.tiles] += torch.bmm(chunk.weight, colors[chunk.ids.clamp_min(0)])
+        trans[chunk.tiles] = chunk.trans[:, :, -1] * (1 - chunk.alpha[:, :, -1])
     return color + trans[..., None] * background, trans
 
 
 def _alpha_partials(chunk: ChunkPairs, conics: torch.Tensor) -> torch.Tensor:
-    """d alpha / d (mean x, mean y, conic a, b, c, opacity) per pair, zero where alpha has no derivative. [T,P,c,6]"""
-    conic = conics[chunk.ids.clamp_min(0)][:, None, :, :]  # [T, 1, c, 3]
+    """d alpha / d (mean x, mean y, conic a, b, c, opacity) per pair, zero where alpha has no derivative. [Ta,P,c,6]"""
+    conic = conics[chunk.ids.clamp_min(0)][:, None, :, :]  # [Ta, 1, c, 3]
     a = torch.where(chunk.unclamped, chunk.alpha, torch.zeros_like(chunk.alpha))
     dx, dy = chunk.dx, chunk.dy
     return torch.stack([
@@ -178,15 +179,21 @@ def _alpha_partials(chunk: ChunkPairs, conics: torch.Tensor) -> torch.Tensor:
     ], dim=-1)
 
 
-def _color_alpha_partials(chunk: ChunkPairs, colors: torch.Tensor, final_color: torch.Tensor) -> torch.Tensor:
-    """d pixel colour / d alpha_i = c_i T_i - (colour behind i) / (1 - alpha_i). [T, P, c, D]"""
-    behind = final_color[:, :, None, :] - chunk.prefix
-    return (colors[chunk.ids.clamp_min(0)][:, None, :, :] * chunk.trans[..., None]
-            - behind / (1 - chunk.alpha)[..., None])
+def _color_alpha_partials(chunk: ChunkPairs, colors: torch.Tensor, final_color: torch.Tensor,
+                          prefix: torch.Tensor) -> torch.Tensor:
+    """d pixel colour / d alpha_i = c_i T_i - (colour behind i) / (1 - alpha_i). [Ta, P, c, D]
+
+    `prefix` [T, P, D] holds the colour accumulated in front of this chunk and is advanced past it.
+    """
+    col = colors[chunk.ids.clamp_min(0)][:, None, :, :]  # [Ta, 1, c, D]
+    incl = prefix[chunk.tiles][:, :, None, :] + torch.cumsum(chunk.weight[..., None] * col, dim=2)
+    prefix[chunk.tiles] = incl[:, :, -1, :]
+    behind = final_color[chunk.tiles][:, :, None, :] - incl
+    return col * chunk.trans[..., None] - behind / (1 - chunk.alpha)[..., None]
 
 
 def _scatter_rows(values: torch.Tensor, ids: torch.Tensor, n: int) -> torch.Tensor:
-    """Sum rows [T, c, ...] into [n, ...] by Gaussian id, dropping the -1 padding."""
+    """Sum rows [Ta, c, ...] into [n, ...] by Gaussian id, dropping the -1 padding."""
     flat_ids = ids.reshape(-1)
     flat = values.reshape(flat_ids.shape[0], -1)
     keep = flat_ids >= 0
@@ -209,18 +216,33 @@ class _RasterizeFunction(torch.autograd.Function):
         bins, settings = ctx.bins, ctx.settings
         n = means2d.shape[0]
         g_color = _from_image(grad_image, bins)  # [T, P, D]
-        g_trans = -_from_image(grad_alpha[None], bins)[..., 0] if grad_alpha is not None else None  # dL/dT_final
+        # Scalar chain per pixel: dL/dalpha_i = (g.c_i) T_i - (g.F - g.prefix_incl_i) / (1 - alpha_i)
+        # with F the final colour, so no [.., D] tensor per pair is needed.
+        g_final = (g_color * final_color).sum(-1)  # [T, P]
+        g_prefix = torch.zeros_like(g_final)
+        g_trans = -_from_image(grad_alpha[None], bins)[..., 0] * trans_final  # dL/dT_final * T_final
         grad_geom = means2d.new_zeros(n, NUM_GEOMETRY_ATTRIBUTES)
         grad_colors = torch.zeros_like(colors)
+        conics_d = conics.detach()
         with torch.no_grad():
-            for chunk in _iterate_chunks(bins, means2d, conics, opacities, colors, settings):
-                dc_dalpha = _color_alpha_partials(chunk, colors, final_color)  # [T, P, c, D]
-                dl_dalpha = (dc_dalpha * g_color[:, :, None, :]).sum(-1)  # [T, P, c]
-                if g_trans is not None:
-                    dl_dalpha = dl_dalpha - (g_trans * trans_final)[:, :, None] / (1 - chunk.alpha)
-                per_pair = dl_dalpha[..., None] * _alpha_partials(chunk, conics)  # [T, P, c, 6]
-                grad_geom += _scatter_rows(per_pair.sum(1), chunk.ids, n)
-                grad_colors += _scatter_rows(torch.einsum("tpc,tpd->tcd", chunk.weight, g_color), chunk.ids, n)
+            for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
+                g = g_color[chunk.tiles]  # [Ta, P, D]
+                gc = torch.bmm(g, colors[chunk.ids.clamp_min(0)].transpose(1, 2))  # [Ta, P, c]
+                incl = g_prefix[chunk.tiles][:, :, None] + torch.cumsum(chunk.weight * gc, dim=-1)
+                g_prefix[chunk.tiles] = incl[..., -1]
+                one_minus = 1 - chunk.alpha
+                dl_dalpha = gc * chunk.trans - (g_final[chunk.tiles][:, :, None] - incl) / one_minus
+                dl_dalpha = dl_dalpha - g_trans[chunk.tiles][:, :, None] / one_minus
+                la = torch.where(chunk.unclamped, dl_dalpha * chunk.alpha, torch.zeros_like(dl_dalpha))
+                dx, dy = chunk.dx, chunk.dy
+                s_x, s_y = (la * dx).sum(1), (la * dy).sum(1)  # [Ta, c]
+                s_xx, s_xy, s_yy = (la * dx * dx).sum(1), (la * dx * dy).sum(1), (la * dy * dy).sum(1)
+                s_o = torch.where(chunk.unclamped, dl_dalpha * chunk.gauss, torch.zeros_like(dl_dalpha)).sum(1)
+                q = conics_d[chunk.ids.clamp_min(0)]  # [Ta, c, 3]
+                per_gauss = torch.stack([q[..., 0] * s_x + q[..., 1] * s_y, q[..., 1] * s_x + q[..., 2] * s_y,
+                                         -0.5 * s_xx, -s_xy, -0.5 * s_yy, s_o], dim=-1)  # [Ta, c, 6]
+                grad_geom += _scatter_rows(per_gauss, chunk.ids, n)
+                grad_colors += _scatter_rows(torch.bmm(chunk.weight.transpose(1, 2), g), chunk.ids, n)
         grad_bg = (g_color * trans_final[..., None]).sum((0, 1))
         return (grad_geom[:, 0:2], grad_geom[:, 2:5], grad_geom[:, 5], grad_colors, grad_bg,
                 None, None, None, None)
@@ -277,9 +299,10 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
     geo = NUM_GEOMETRY_ATTRIBUTES
     bins = bin_gaussians(means2d, radii, depths, width, height, settings.tile_size)
     final_color, _ = _composite(bins, means2d, conics, opacities, colors, background, settings)
+    prefix = torch.zeros_like(final_color)
     gram = torch.zeros(n, geo + d, geo + d, dtype=torch.float64, device=means2d.device)
-    for chunk in _iterate_chunks(bins, means2d, conics, opacities, colors, settings):
-        u = _color_alpha_partials(chunk, colors, final_color).double()  # [T, P, c, D]
+    for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
+        u = _color_alpha_partials(chunk, colors, final_color, prefix).double()  # [Ta, P, c, D]
         v = _alpha_partials(chunk, conics).double()  # [T, P, c, 6]
         w = chunk.weight.double()  # [T, P, c]
         t, p, c = w.shape
@@ -318,16 +341,17 @@ def pixel_attribute_partials(means2d: torch.Tensor, conics: torch.Tensor, opacit
     d = colors.shape[1]
     bins = bin_gaussians(means2d, radii, depths, width, height, settings.tile_size)
     final_color, _ = _composite(bins, means2d, conics, opacities, colors, background, settings)
+    prefix = torch.zeros_like(final_color)
     pix, gid, jacs = [], [], []
     eye = torch.eye(d, dtype=means2d.dtype, device=means2d.device)
-    for chunk in _iterate_chunks(bins, means2d, conics, opacities, colors, settings):
-        u = _color_alpha_partials(chunk, colors, final_color)  # [T, P, c, D]
+    for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
+        u = _color_alpha_partials(chunk, colors, final_color, prefix)  # [Ta, P, c, D]
         v = _alpha_partials(chunk, conics)  # [T, P, c, 6]
         jac = torch.cat([u[..., :, None] * v[..., None, :],
                          chunk.weight[..., None, None] * eye], dim=-1)  # [T, P, c, D, A]
         mask = chunk.alpha > 0
         t_idx, p_idx, c_idx = torch.nonzero(mask, as_tuple=True)
-        pix.append(bins.pixel_index[t_idx, p_idx])
+        pix.append(bins.pixel_index[chunk.tiles[t_idx], p_idx])
         gid.append(chunk.ids[t_idx, c_idx])
         jacs.append(jac[mask])
     if not jacs:

@@ -1,0 +1,141 @@
+"""The built-in scene: a small Blender-format dataset generated procedurally and rendered by our rasterizer.
+
+A few coloured objects made of Gaussians (a sphere, a box, a ring and a ground disc) seen from `num_train` training
+and `num_test` test cameras on a hemisphere (radius 4, looking at the origin, the NeRF-synthetic field of view).
+Deterministic for a given seed, so the README's main command needs no download.
+
+    python -m scene.builtin data/builtin [--seed 0] [--resolution 128]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import torch
+
+from gaussian_renderer import rasterization
+from utils.errors import UserError, run_cli
+from utils.image import save_image
+from utils.io import write_json
+
+CAMERA_RADIUS = 4.0
+CAMERA_ANGLE_X = 0.6911  # NeRF-synthetic field of view
+STAMP = "builtin_scene.json"
+
+
+def _object_points(g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Centres [N,3], colours [N,3] and isotropic scales [N] of the scene's Gaussians."""
+    parts = []
+
+    def add(points, base_rgb, jitter, scale):
+        colors = (torch.tensor(base_rgb) + jitter * (torch.rand(points.shape[0], 3, generator=g) - 0.5)).clamp(0, 1)
+        parts.append((points, colors, torch.full((points.shape[0],), scale)))
+
+    # Sphere (red, with a yellow band so its rotation is observable).
+    n = 900
+    u = torch.rand(n, generator=g) * 2 - 1
+    phi = torch.rand(n, generator=g) * 2 * math.pi
+    r = torch.sqrt(1 - u * u)
+    sphere = torch.stack([r * torch.cos(phi), r * torch.sin(phi), u], 1) * 0.45 + torch.tensor([0.5, 0.3, 0.45])
+    band = u.abs() < 0.2
+    add(sphere[~band], (0.85, 0.15, 0.1), 0.15, 0.05)
+    add(sphere[band], (0.95, 0.85, 0.1), 0.1, 0.05)
+    # Box (blue faces), surface samples.
+    n = 900
+    p = torch.rand(n, 3, generator=g) * 2 - 1
+    axis = torch.randint(0, 3, (n,), generator=g)
+    p[torch.arange(n), axis] = torch.sign(p[torch.arange(n), axis])
+    add(p * torch.tensor([0.3, 0.35, 0.3]) + torch.tensor([-0.55, -0.35, 0.3]), (0.15, 0.3, 0.9), 0.2, 0.045)
+    # Ring (green torus) standing up.
+    n = 700
+    a, b = torch.rand(n, generator=g) * 2 * math.pi, torch.rand(n, generator=g) * 2 * math.pi
+    ring = torch.stack([(0.4 + 0.1 * torch.cos(b)) * torch.cos(a), 0.1 * torch.sin(b),
+                        (0.4 + 0.1 * torch.cos(b)) * torch.sin(a)], 1) + torch.tensor([-0.1, 0.6, 0.55])
+    add(ring, (0.1, 0.75, 0.25), 0.2, 0.04)
+    # Ground disc (checkered grey/white).
+    n = 1500
+    rad = torch.sqrt(torch.rand(n, generator=g)) * 1.2
+    ang = torch.rand(n, generator=g) * 2 * math.pi
+    disc = torch.stack([rad * torch.cos(ang), rad * torch.sin(ang), torch.zeros(n)], 1)
+    checker = ((torch.floor(disc[:, 0] / 0.3) + torch.floor(disc[:, 1] / 0.3)) % 2 == 0)
+    add(disc[checker], (0.9, 0.9, 0.85), 0.05, 0.06)
+    add(disc[~checker], (0.35, 0.35, 0.4), 0.05, 0.06)
+    means = torch.cat([q[0] for q in parts])
+    colors = torch.cat([q[1] for q in parts])
+    scales = torch.cat([q[2] for q in parts])
+    return means, colors, scales
+
+
+def hemisphere_positions(count: int, offset: float) -> torch.Tensor:
+    """Camera centres spread over the upper hemisphere (elevation 10..75 degrees) by a golden-angle spiral. [V, 3]"""
+    i = torch.arange(count, dtype=torch.float64) + offset
+    elevation = torch.deg2rad(10 + 65 * (i / (count + offset)))
+    azimuth = i * math.pi * (3 - math.sqrt(5))
+    return CAMERA_RADIUS * torch.stack([torch.cos(elevation) * torch.cos(azimuth),
+                                        torch.cos(elevation) * torch.sin(azimuth), torch.sin(elevation)], 1)
+
+
+def look_at(eye: torch.Tensor) -> torch.Tensor:
+    """World-to-camera [4,4] (OpenCV) for a camera at `eye` looking at the origin with +z up."""
+    forward = -eye / eye.norm()
+    right = torch.linalg.cross(forward, torch.tensor([0.0, 0.0, 1.0], dtype=eye.dtype))
+    right = right / right.norm()
+    down = torch.linalg.cross(forward, right)
+    view = torch.eye(4, dtype=eye.dtype)
+    view[:3, :3] = torch.stack([right, down, forward])
+    view[:3, 3] = -view[:3, :3] @ eye
+    return view
+
+
+def make_builtin_scene(out_dir: str | Path, seed: int = 0, resolution: int = 128, num_train: int = 100,
+                       num_test: int = 25) -> Path:
+    """Write the dataset (skipped when `out_dir` already holds one made with the same parameters)."""
+    out = Path(out_dir)
+    params = {"seed": seed, "resolution": resolution, "num_train": num_train, "num_test": num_test, "version": 1}
+    stamp = out / STAMP
+    if stamp.is_file() and json.loads(stamp.read_text()) == params:
+        return out
+    if resolution < 8:
+        raise UserError(f"--resolution must be at least 8 pixels, got {resolution}")
+    g = torch.Generator().manual_seed(seed)
+    means, colors, scales = _object_points(g)
+    n = means.shape[0]
+    quats = torch.zeros(n, 4)
+    quats[:, 0] = 1
+    opacities = torch.full((n,), 0.9)
+    log_scales = torch.log(scales)[:, None].repeat(1, 3)
+    focal = 0.5 * resolution / math.tan(0.5 * CAMERA_ANGLE_X)
+    intrinsics = torch.tensor([focal, focal, resolution / 2, resolution / 2])
+    gl_from_cv = torch.diag(torch.tensor([1.0, -1.0, -1.0, 1.0], dtype=torch.float64))
+    for split, count, offset in (("train", num_train, 0.5), ("test", num_test, 0.25)):
+        frames = []
+        for idx, eye in enumerate(hemisphere_positions(count, offset)):
+            viewmat = look_at(eye)
+            out_img = rasterization(means, quats, torch.exp(log_scales), opacities, colors, viewmat.float(),
+                                    intrinsics, resolution, resolution)
+            alpha = out_img.alpha.clamp(1e-6, 1)
+            straight = (out_img.image / alpha).clamp(0, 1)  # un-premultiply (black background)
+            save_image(torch.cat([straight, out_img.alpha[None]]), out / split / f"r_{idx}.png")
+            c2w = torch.linalg.inv(viewmat) @ gl_from_cv
+            frames.append({"file_path": f"./{split}/r_{idx}", "transform_matrix": c2w.tolist()})
+        write_json(out / f"transforms_{split}.json", {"camera_angle_x": CAMERA_ANGLE_X, "frames": frames})
+    write_json(stamp, params)
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("out_dir", help="where to write the dataset")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--resolution", type=int, default=128, help="image width and height in pixels")
+    parser.add_argument("--num_train", type=int, default=100)
+    parser.add_argument("--num_test", type=int, default=25)
+    args = parser.parse_args()
+    out = make_builtin_scene(args.out_dir, args.seed, args.resolution, args.num_train, args.num_test)
+    print(f"built-in scene ready in {out}")
+
+
+if __name__ == "__main__":
+    run_cli(main)

@@ -1,0 +1,163 @@
+"""A small reader for COLMAP sparse models (cameras, images, points3D), binary and text."""
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from utils.errors import UserError
+
+# model id -> (name, number of parameters)
+CAMERA_MODELS = {0: ("SIMPLE_PINHOLE", 3), 1: ("PINHOLE", 4), 2: ("SIMPLE_RADIAL", 4), 3: ("RADIAL", 5),
+                 4: ("OPENCV", 8), 5: ("OPENCV_FISHEYE", 8), 6: ("FULL_OPENCV", 12), 7: ("FOV", 5),
+                 8: ("SIMPLE_RADIAL_FISHEYE", 4), 9: ("RADIAL_FISHEYE", 5), 10: ("THIN_PRISM_FISHEYE", 12)}
+MODEL_IDS = {name: (mid, n) for mid, (name, n) in CAMERA_MODELS.items()}
+
+
+@dataclass
+class ColmapCamera:
+    id: int
+    model: str
+    width: int
+    height: int
+    params: np.ndarray
+
+
+@dataclass
+class ColmapImage:
+    id: int
+    qvec: np.ndarray  # world-to-camera rotation, wxyz
+    tvec: np.ndarray  # world-to-camera translation
+    camera_id: int
+    name: str
+
+
+def _read(fh, fmt: str):
+    size = struct.calcsize("<" + fmt)
+    data = fh.read(size)
+    if len(data) != size:
+        raise EOFError
+    return struct.unpack("<" + fmt, data)
+
+
+def read_cameras_binary(path: Path) -> dict[int, ColmapCamera]:
+    cams = {}
+    with open(path, "rb") as fh:
+        (count,) = _read(fh, "Q")
+        for _ in range(count):
+            cid, model_id, width, height = _read(fh, "iiQQ")
+            name, n = CAMERA_MODELS[model_id]
+            cams[cid] = ColmapCamera(cid, name, width, height, np.array(_read(fh, "d" * n)))
+    return cams
+
+
+def read_images_binary(path: Path) -> dict[int, ColmapImage]:
+    images = {}
+    with open(path, "rb") as fh:
+        (count,) = _read(fh, "Q")
+        for _ in range(count):
+            iid, *rest = _read(fh, "idddddddi")
+            qvec, tvec, cam_id = np.array(rest[:4]), np.array(rest[4:7]), rest[7]
+            name = b""
+            while (ch := fh.read(1)) != b"\x00":
+                if not ch:
+                    raise EOFError
+                name += ch
+            (num_points,) = _read(fh, "Q")
+            fh.read(24 * num_points)  # (x, y, point3D_id) per 2D point: not needed
+            images[iid] = ColmapImage(iid, qvec, tvec, cam_id, name.decode())
+    return images
+
+
+def read_points_binary(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    xyz, rgb = [], []
+    with open(path, "rb") as fh:
+        (count,) = _read(fh, "Q")
+        for _ in range(count):
+            vals = _read(fh, "QdddBBBd")
+            xyz.append(vals[1:4])
+            rgb.append(vals[4:7])
+            (track_len,) = _read(fh, "Q")
+            fh.read(8 * track_len)
+    return np.array(xyz, dtype=np.float64).reshape(-1, 3), np.array(rgb, dtype=np.uint8).reshape(-1, 3)
+
+
+def _text_lines(path: Path):
+    for line in path.read_text().splitlines():
+        line = line.strip()
+        if line and not line.startswith("#"):
+            yield line
+
+
+def read_cameras_text(path: Path) -> dict[int, ColmapCamera]:
+    cams = {}
+    for line in _text_lines(path):
+        parts = line.split()
+        cid, model, width, height = int(parts[0]), parts[1], int(parts[2]), int(parts[3])
+        cams[cid] = ColmapCamera(cid, model, width, height, np.array([float(p) for p in parts[4:]]))
+    return cams
+
+
+def read_images_text(path: Path) -> dict[int, ColmapImage]:
+    images = {}
+    lines = list(_text_lines(path))
+    # Each image has two lines; the second (2D points) may be empty and then is skipped by _text_lines,
+    # so parse by recognising header lines: 10 fields with a file name last.
+    for line in lines:
+        parts = line.split()
+        if len(parts) == 10 and not _is_number(parts[9]):
+            iid = int(parts[0])
+            images[iid] = ColmapImage(iid, np.array([float(p) for p in parts[1:5]]),
+                                      np.array([float(p) for p in parts[5:8]]), int(parts[8]), parts[9])
+    return images
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+def read_points_text(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    xyz, rgb = [], []
+    for line in _text_lines(path):
+        parts = line.split()
+        xyz.append([float(p) for p in parts[1:4]])
+        rgb.append([int(p) for p in parts[4:7]])
+    return np.array(xyz, dtype=np.float64).reshape(-1, 3), np.array(rgb, dtype=np.uint8).reshape(-1, 3)
+
+
+def read_model(sparse_dir: Path):
+    """(cameras, images, (xyz [P,3], rgb [P,3] uint8)) from `sparse_dir`, binary preferred over text."""
+    try:
+        if (sparse_dir / "cameras.bin").is_file():
+            return (read_cameras_binary(sparse_dir / "cameras.bin"), read_images_binary(sparse_dir / "images.bin"),
+                    read_points_binary(sparse_dir / "points3D.bin"))
+        return (read_cameras_text(sparse_dir / "cameras.txt"), read_images_text(sparse_dir / "images.txt"),
+                read_points_text(sparse_dir / "points3D.txt"))
+    except FileNotFoundError as exc:
+        raise UserError(f"COLMAP model in {sparse_dir} is incomplete: {Path(exc.filename).name} is missing") from None
+    except (EOFError, struct.error, KeyError, ValueError, IndexError):
+        raise UserError(f"COLMAP model in {sparse_dir} is corrupt or truncated; re-export it from COLMAP") from None
+
+
+def qvec_to_rotmat(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def pinhole_intrinsics(cam: ColmapCamera) -> tuple[float, float, float, float, bool]:
+    """(fx, fy, cx, cy, distorted) treating every supported model as a pinhole."""
+    p = cam.params
+    if cam.model in ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL"):
+        return p[0], p[0], p[1], p[2], cam.model != "SIMPLE_PINHOLE"
+    if cam.model in ("PINHOLE", "OPENCV"):
+        return p[0], p[1], p[2], p[3], cam.model == "OPENCV"
+    raise UserError(f"COLMAP camera {cam.id} uses model {cam.model}; supported: PINHOLE, SIMPLE_PINHOLE, "
+                    "SIMPLE_RADIAL, RADIAL, OPENCV (undistort the images with COLMAP first)")

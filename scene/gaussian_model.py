@@ -1,0 +1,117 @@
+"""`GaussianModel`: the raw per-Gaussian parameters and their activations, nothing more."""
+from __future__ import annotations
+
+import os
+
+import torch
+from torch import nn
+
+from gaussian_renderer.sh import num_sh_bases, rgb_to_sh
+from scene import ply_io
+from utils.knn import mean_sq_dist_to_neighbours
+
+STATE_FORMAT_VERSION = 1
+INITIAL_OPACITY = 0.1
+
+
+class GaussianModel:
+    """Raw parameters in `params` (means, sh_dc, sh_rest, log_scales, quats (wxyz), logit_opacities [N])."""
+
+    def __init__(self, sh_degree: int, params: dict[str, torch.Tensor] | None = None):
+        self.max_sh_degree = sh_degree
+        self.active_sh_degree = 0
+        self.params: dict[str, nn.Parameter] = {}
+        if params is not None:
+            self.set_params(params)
+
+    def set_params(self, params: dict[str, torch.Tensor]) -> None:
+        """Replace every parameter (as leaf `nn.Parameter`s)."""
+        self.params = {k: nn.Parameter(v.detach().clone().contiguous()) for k, v in params.items()}
+
+    # ---- activated views -------------------------------------------------------------------------------
+    @property
+    def means(self) -> torch.Tensor:  # [N, 3]
+        return self.params["means"]
+
+    @property
+    def quats(self) -> torch.Tensor:  # [N, 4] raw (the projection normalises)
+        return self.params["quats"]
+
+    @property
+    def unit_quats(self) -> torch.Tensor:  # [N, 4]
+        q = self.params["quats"]
+        return q / q.norm(dim=-1, keepdim=True)
+
+    @property
+    def scales(self) -> torch.Tensor:  # [N, 3]
+        return torch.exp(self.params["log_scales"])
+
+    @property
+    def opacities(self) -> torch.Tensor:  # [N]
+        return torch.sigmoid(self.params["logit_opacities"])
+
+    @property
+    def sh_coeffs(self) -> torch.Tensor:  # [N, K, 3]
+        return torch.cat([self.params["sh_dc"], self.params["sh_rest"]], dim=1)
+
+    @property
+    def num_gaussians(self) -> int:
+        return self.params["means"].shape[0]
+
+    @property
+    def device(self) -> torch.device:
+        return self.params["means"].device
+
+    def increase_sh_degree(self) -> None:
+        self.active_sh_degree = min(self.active_sh_degree + 1, self.max_sh_degree)
+
+    # ---- construction ----------------------------------------------------------------------------------
+    @classmethod
+    def from_point_cloud(cls, points: torch.Tensor, colors: torch.Tensor, sh_degree: int,
+                         device: str | torch.device = "cpu") -> "GaussianModel":
+        """The 3DGS initialisation: colour in the SH DC term, isotropic scale from the 3 nearest neighbours,
+        identity rotation, opacity 0.1.
+
+        Args:
+            points: positions. [P, 3]
+            colors: RGB in [0, 1]. [P, 3]
+        """
+        points = points.to(device=device, dtype=torch.float32)
+        n = points.shape[0]
+        dist2 = mean_sq_dist_to_neighbours(points, k=3).clamp_min(1e-7)  # [P]
+        quats = torch.zeros(n, 4, device=device)
+        quats[:, 0] = 1.0
+        return cls(sh_degree, {
+            "means": points,
+            "sh_dc": rgb_to_sh(colors.to(device=device, dtype=torch.float32))[:, None, :],
+            "sh_rest": torch.zeros(n, num_sh_bases(sh_degree) - 1, 3, device=device),
+            "log_scales": torch.log(torch.sqrt(dist2))[:, None].repeat(1, 3),
+            "quats": quats,
+            "logit_opacities": torch.logit(torch.full((n,), INITIAL_OPACITY, device=device)),
+        })
+
+    # ---- persistence ------------------------------------------------------------------------------------
+    def save_ply(self, path: str | os.PathLike) -> None:
+        """Write the standard 3DGS PLY (opens in common splat viewers)."""
+        ply_io.save_ply(path, {k: v.detach() for k, v in self.params.items()})
+
+    @classmethod
+    def load_ply(cls, path: str | os.PathLike, device: str | torch.device = "cpu") -> "GaussianModel":
+        """Read a standard 3DGS PLY; the SH degree follows from its f_rest count (all of it active)."""
+        params, degree = ply_io.load_ply(path)
+        model = cls(degree, {k: v.to(device) for k, v in params.items()})
+        model.active_sh_degree = degree
+        return model
+
+    def state_dict(self) -> dict:
+        return {"format_version": STATE_FORMAT_VERSION, "max_sh_degree": self.max_sh_degree,
+                "active_sh_degree": self.active_sh_degree,
+                "params": {k: v.detach().clone() for k, v in self.params.items()}}
+
+    def load_state_dict(self, state: dict) -> None:
+        if state.get("format_version") != STATE_FORMAT_VERSION:
+            raise ValueError(f"unknown GaussianModel state version {state.get('format_version')}")
+        self.max_sh_degree = state["max_sh_degree"]
+        self.active_sh_degree = state["active_sh_degree"]
+        device = self.device if self.params else "cpu"
+        self.set_params({k: v.to(device) for k, v in state["params"].items()})

@@ -1,0 +1,1 @@
+"""One module per selector; each registers itself with `active.registry.register_selector`."""

@@ -39,7 +39,7 @@ class ModelConfig:
 class PipelineConfig:
     """Rasterizer settings."""
 
-    tile_size: int = field(default=16, metadata=_flag(None, "rasterizer tile size in pixels"))
+    tile_size: int = field(default=4, metadata=_flag(None, "rasterizer tile size in pixels"))
 
 
 @dataclass(frozen=True)

@@ -35,28 +35,41 @@ class TileBins:
     pixel_index: torch.Tensor  # [T, P] flat index y * W + x (clamped for invalid pixels)
 
 
-def tile_ranges(means2d: torch.Tensor, radii: torch.Tensor, width: int, height: int,
-                tile_size: int) -> tuple[torch.Tensor, ...]:
-    """Inclusive tile rectangle (x0, x1, y0, y1) of each Gaussian's 3-sigma box, clamped to the image. [N] each"""
+def tile_ranges(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, radii: torch.Tensor,
+                width: int, height: int, tile_size: int, alpha_min: float) -> tuple[torch.Tensor, ...]:
+    """Inclusive tile rectangle (x0, x1, y0, y1) of the pixels a Gaussian can reach, clamped to the image. [N] each
+
+    The reach is the tighter of the 3-sigma radius and the opacity-aware extent: alpha = o exp(-d^2/2) falls below
+    alpha_min beyond d = sqrt(2 ln(o / alpha_min)) standard deviations, per axis (sqrt of the 2D covariance's
+    diagonal). Pairs dropped this way would be skipped by the alpha test anyway, so the image is unchanged.
+    A Gaussian whose opacity is below alpha_min gets an empty rectangle (x0 > x1).
+    """
     tiles_x, tiles_y = -(-width // tile_size), -(-height // tile_size)
+    det = (conics[:, 0] * conics[:, 2] - conics[:, 1] ** 2).clamp_min(1e-30)
+    sigma_x, sigma_y = torch.sqrt((conics[:, 2] / det).clamp_min(0)), torch.sqrt((conics[:, 0] / det).clamp_min(0))
+    reach = torch.sqrt(2 * torch.log((opacities / alpha_min).clamp_min(1.0)))  # in standard deviations
     r = radii.to(means2d.dtype)
-    x0 = torch.floor((means2d[:, 0] - r) / tile_size).clamp(0, tiles_x - 1).long()
-    x1 = torch.floor((means2d[:, 0] + r) / tile_size).clamp(0, tiles_x - 1).long()
-    y0 = torch.floor((means2d[:, 1] - r) / tile_size).clamp(0, tiles_y - 1).long()
-    y1 = torch.floor((means2d[:, 1] + r) / tile_size).clamp(0, tiles_y - 1).long()
-    return x0, x1, y0, y1
+    ext_x, ext_y = torch.minimum(reach * sigma_x, r), torch.minimum(reach * sigma_y, r)
+    x0 = torch.floor((means2d[:, 0] - ext_x) / tile_size).clamp(0, tiles_x - 1).long()
+    x1 = torch.floor((means2d[:, 0] + ext_x) / tile_size).clamp(0, tiles_x - 1).long()
+    y0 = torch.floor((means2d[:, 1] - ext_y) / tile_size).clamp(0, tiles_y - 1).long()
+    y1 = torch.floor((means2d[:, 1] + ext_y) / tile_size).clamp(0, tiles_y - 1).long()
+    empty = opacities < alpha_min
+    return x0, torch.where(empty, x0 - 1, x1), y0, y1
 
 
-def bin_gaussians(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor, width: int, height: int,
-                  tile_size: int) -> TileBins:
+def bin_gaussians(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, radii: torch.Tensor,
+                  depths: torch.Tensor, width: int, height: int, settings: RasterSettings) -> TileBins:
     """Build depth-sorted per-tile lists from the (tile, Gaussian) pairs of each Gaussian's tile rectangle."""
+    tile_size = settings.tile_size
     device = means2d.device
     tiles_x, tiles_y = -(-width // tile_size), -(-height // tile_size)
     num_tiles = tiles_x * tiles_y
     with torch.no_grad():
         ids = torch.nonzero(radii > 0).squeeze(1)  # [n]
-        x0, x1, y0, y1 = tile_ranges(means2d.detach()[ids], radii[ids], width, height, tile_size)
-        nx, ny = x1 - x0 + 1, y1 - y0 + 1
+        x0, x1, y0, y1 = tile_ranges(means2d.detach()[ids], conics.detach()[ids], opacities.detach()[ids],
+                                     radii[ids], width, height, tile_size, settings.alpha_min)
+        nx, ny = (x1 - x0 + 1).clamp_min(0), y1 - y0 + 1
         counts = nx * ny  # [n]
         total = int(counts.sum())
         gid = torch.repeat_interleave(ids, counts)  # [M]
@@ -276,7 +289,7 @@ def rasterize(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tens
     """
     settings = settings or RasterSettings()
     _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
-    bins = bin_gaussians(means2d, radii, depths, width, height, settings.tile_size)
+    bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
     return _RasterizeFunction.apply(means2d, conics, opacities, colors, background, bins, width, height, settings)
 
 
@@ -297,7 +310,7 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
     _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
     n, d = colors.shape
     geo = NUM_GEOMETRY_ATTRIBUTES
-    bins = bin_gaussians(means2d, radii, depths, width, height, settings.tile_size)
+    bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
     final_color, _ = _composite(bins, means2d, conics, opacities, colors, background, settings)
     prefix = torch.zeros_like(final_color)
     gram = torch.zeros(n, geo + d, geo + d, dtype=torch.float64, device=means2d.device)
@@ -339,7 +352,7 @@ def pixel_attribute_partials(means2d: torch.Tensor, conics: torch.Tensor, opacit
     settings = settings or RasterSettings()
     _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
     d = colors.shape[1]
-    bins = bin_gaussians(means2d, radii, depths, width, height, settings.tile_size)
+    bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
     final_color, _ = _composite(bins, means2d, conics, opacities, colors, background, settings)
     prefix = torch.zeros_like(final_color)
     pix, gid, jacs = [], [], []

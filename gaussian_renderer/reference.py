@@ -13,8 +13,8 @@ def rasterize_reference(means2d: torch.Tensor, conics: torch.Tensor, opacities: 
                         ) -> tuple[torch.Tensor, torch.Tensor]:
     """Dense front-to-back compositing with plain autograd; same rules and cut-offs as `rasterize`.
 
-    A Gaussian touches a pixel only if the pixel's tile lies in the Gaussian's tile rectangle (its 3-sigma box
-    rounded out to tiles), exactly the binning rule of the fast path. Loops over Gaussians in depth order.
+    A Gaussian touches a pixel only if the pixel's tile lies in the Gaussian's tile rectangle (`tile_ranges`: its
+    reach rounded out to tiles), exactly the binning rule of the fast path. Loops over Gaussians in depth order.
     Returns image [D, H, W] and alpha [H, W].
     """
     s = settings or RasterSettings()
@@ -22,7 +22,8 @@ def rasterize_reference(means2d: torch.Tensor, conics: torch.Tensor, opacities: 
                             indexing="ij")
     px, py = xs.reshape(-1).to(means2d.dtype) + 0.5, ys.reshape(-1).to(means2d.dtype) + 0.5  # [H*W]
     tile_x, tile_y = xs.reshape(-1) // s.tile_size, ys.reshape(-1) // s.tile_size
-    x0, x1, y0, y1 = tile_ranges(means2d.detach(), radii, width, height, s.tile_size)
+    x0, x1, y0, y1 = tile_ranges(means2d.detach(), conics.detach(), opacities.detach(), radii, width, height,
+                                 s.tile_size, s.alpha_min)
     trans = torch.ones(height * width, dtype=means2d.dtype, device=means2d.device)
     done = torch.zeros(height * width, dtype=torch.bool, device=means2d.device)
     image = torch.zeros(height * width, colors.shape[1], dtype=means2d.dtype, device=means2d.device)

@@ -1,0 +1,360 @@
+"""Train a 3D Gaussian Splatting model, optionally with active view selection.
+
+    python train.py -s data/lego -r 8 --eval                          # all training views
+    python train.py -s data/lego -r 8 --eval --method lite_gs --eps 0.1 # active: seed views + K per step
+
+Every acquisition stage ends with a checkpoint; rerunning the same command resumes from the newest one.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import random
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from tqdm import tqdm
+
+import active  # noqa: F401  (registers the selectors)
+from active.base import SelectionContext
+from active.fisher import FisherOracle
+from active.registry import build_selector, list_selectors
+from active.schedule import StagePlan, farthest_point_views, plan_stages
+from arguments import (ActiveConfig, ModelConfig, PipelineConfig, RunConfig, add_config_args, config_from_args,
+                       config_to_dict)
+from gaussian_renderer import RasterSettings, render
+from scene.cameras import Camera
+from scene.densify import DensifyConfig, DensifyStrategy
+from scene.gaussian_model import GaussianModel
+from scene.optim import OptimConfig, PositionLRSchedule, create_optimizer
+from scene.scene import Scene
+from utils.checkpoint import RunDirectory
+from utils.errors import UserError, run_cli
+from utils.io import write_json
+from utils.losses import l1_loss, ssim
+from utils.image import psnr
+from utils.seeding import rng_state, seed_everything, set_rng_state
+
+log = logging.getLogger("train")
+
+
+@dataclass
+class TrainConfig:
+    """All config groups of one run."""
+
+    model: ModelConfig
+    pipeline: PipelineConfig
+    optim: OptimConfig
+    densify: DensifyConfig
+    active: ActiveConfig
+    run: RunConfig
+
+    def to_dict(self) -> dict[str, Any]:
+        return {name: config_to_dict(getattr(self, name))
+                for name in ("model", "pipeline", "optim", "densify", "active", "run")}
+
+
+@dataclass
+class TrainState:
+    """Everything that changes during a run and is restored on resume."""
+
+    gaussians: GaussianModel
+    optimizer: torch.optim.Optimizer
+    strategy: DensifyStrategy
+    iteration: int = 0
+    stage: int = 0
+    train_views: list[int] = field(default_factory=list)
+    stages: list[dict[str, Any]] = field(default_factory=list)
+    view_stack: list[int] = field(default_factory=list)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_config_args(parser, ModelConfig, "Model")
+    add_config_args(parser, PipelineConfig, "Pipeline")
+    add_config_args(parser, OptimConfig, "Optimization")
+    add_config_args(parser, DensifyConfig, "Densification")
+    add_config_args(parser, ActiveConfig, "Active view selection")
+    add_config_args(parser, RunConfig, "Run")
+    for action in parser._actions:  # list the registered selectors in --method's help
+        if action.dest == "method":
+            action.help = f"view selector, one of {', '.join(list_selectors())}; empty = train on all training views"
+    return parser
+
+
+def parse_config(argv: list[str] | None = None) -> TrainConfig:
+    ns = build_parser().parse_args(argv)
+    cfg = TrainConfig(*(config_from_args(cls, ns) for cls in
+                        (ModelConfig, PipelineConfig, OptimConfig, DensifyConfig, ActiveConfig, RunConfig)))
+    validate_config(cfg)
+    return cfg
+
+
+def validate_config(cfg: TrainConfig) -> None:
+    """Reject bad flag values with one clear line each."""
+    if not cfg.model.source_path:
+        raise UserError("no dataset given: pass -s/--source_path DIR (e.g. data/builtin, made by `python -m scene.builtin data/builtin`)")
+    if cfg.run.iterations <= 0:
+        raise UserError(f"--iterations must be positive, got {cfg.run.iterations}")
+    if cfg.model.device == "cuda" and not torch.cuda.is_available():
+        raise UserError("--device cuda was asked for but torch sees no CUDA device; use --device cpu")
+    a = cfg.active
+    if a.method:
+        if a.method not in list_selectors():
+            raise UserError(f"unknown --method {a.method!r}; choose one of: {', '.join(list_selectors())}")
+        if not 0.0 < a.eps < 1.0:
+            raise UserError(f"--eps must lie in (0, 1), got {a.eps}")
+        if a.sigma <= 0:
+            raise UserError(f"--sigma must be positive, got {a.sigma}")
+
+
+def default_model_path(cfg: TrainConfig) -> str:
+    name = Path(cfg.model.source_path.rstrip("/")).name or "scene"
+    return str(Path("output") / (f"{name}_{cfg.active.method}" if cfg.active.method else name))
+
+
+# ----------------------------------------------------------------------------------------------- training
+
+
+def training_step(state: TrainState, camera: Camera, cfg: TrainConfig, background: torch.Tensor,
+                  settings: RasterSettings, lr_schedule: PositionLRSchedule, extent: float) -> tuple[float, float]:
+    """One optimisation step on one view; returns (loss, psnr)."""
+    it = state.iteration + 1
+    lr_schedule.apply(state.optimizer, it)
+    if it % 1000 == 0:
+        state.gaussians.increase_sh_degree()
+    out = render(camera, state.gaussians, background, settings)
+    gt = camera.image
+    loss = (1.0 - cfg.optim.lambda_dssim) * l1_loss(out.image, gt) + cfg.optim.lambda_dssim * (1.0 - ssim(out.image, gt))
+    if not torch.isfinite(loss):
+        raise UserError(f"the loss became non-finite at iteration {it}; nothing was saved as final. "
+                        "Lower the learning rates or check the input images")
+    loss.backward()
+    with torch.no_grad():
+        state.strategy.step_post_backward(state.gaussians, state.optimizer, out.means2d, out.radii, out.visible,
+                                          camera.width, camera.height, it, extent)
+        state.optimizer.step()
+        state.optimizer.zero_grad(set_to_none=True)
+        train_psnr = float(psnr(out.image.detach(), gt))
+    state.iteration = it
+    return loss.item(), train_psnr
+
+
+def next_view(state: TrainState, rng: random.Random) -> int:
+    """Views are visited in shuffled passes over the current training set, as in 3DGS."""
+    if not state.view_stack:
+        state.view_stack = list(state.train_views)
+        rng.shuffle(state.view_stack)
+    return state.view_stack.pop()
+
+
+@torch.no_grad()
+def test_psnr(gaussians: GaussianModel, cameras: list[Camera], background: torch.Tensor,
+              settings: RasterSettings) -> float | None:
+    """Mean PSNR over `cameras` (None when there are none)."""
+    if not cameras:
+        return None
+    values = [float(psnr(render(c, gaussians, background, settings).image.clamp(0, 1), c.image)) for c in cameras]
+    return sum(values) / len(values)
+
+
+# ----------------------------------------------------------------------------------------------- selection
+
+
+def select_views(state: TrainState, scene: Scene, cfg: TrainConfig, k: int, background: torch.Tensor,
+                 settings: RasterSettings) -> dict[str, Any]:
+    """Run the selector for one acquisition step; returns the stage record for selection.json."""
+    a = cfg.active
+    candidates = [v for v in range(len(scene.train_cameras)) if v not in state.train_views]
+    t0 = time.perf_counter()
+    options = {"eps": a.eps} if a.method in ("lite_gs", "ssg") else {}
+    selector = build_selector(a.method, **options)
+    oracle = None
+    if selector.uses_oracle:
+        oracle = FisherOracle.build(state.gaussians, scene.train_cameras, state.train_views, background, settings,
+                                    sigma=a.sigma, delta_rel=a.delta_rel, delta_abs=a.delta_abs,
+                                    param_groups=a.fisher_params, mode=a.fisher_mode, cache_mb=a.fisher_cache_mb)
+    generator = torch.Generator().manual_seed(cfg.run.seed * 100_003 + state.stage)
+    selection = selector.select(SelectionContext(candidate_ids=candidates,
+                                                 oracle=oracle.gain_oracle if oracle else None,
+                                                 generator=generator, stage=state.stage), k)
+    select_seconds = time.perf_counter() - t0
+    return {
+        "stage": state.stage,
+        "iteration": state.iteration,
+        "train_views": list(state.train_views),
+        "candidates": len(candidates),
+        "selected": [int(v) for v in selection.ids],
+        "gains": [float(g) for g in selection.gains],
+        "oracle_calls": {"conservative": selection.oracle_calls.conservative,
+                         "evaluated": selection.oracle_calls.evaluated},
+        "fisher_views_computed": oracle.views_computed if oracle else 0,
+        "fisher_seconds": oracle.fisher_seconds if oracle else 0.0,
+        "select_seconds": select_seconds,
+        "test_psnr": test_psnr(state.gaussians, scene.test_cameras, background, settings),
+    }
+
+
+# ----------------------------------------------------------------------------------------------- the run
+
+
+def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
+    """Seed views: --init_views, or farthest-point sampling of camera centres from view 0."""
+    pool = len(scene.train_cameras)
+    a = cfg.active
+    if a.init_views:
+        bad = [v for v in a.init_views if not 0 <= v < pool]
+        if bad or len(set(a.init_views)) != len(a.init_views):
+            raise UserError(f"--init_views must be distinct view ids in [0, {pool}); got {list(a.init_views)}")
+        return list(a.init_views)
+    centers = torch.stack([c.camera_center.cpu() for c in scene.train_cameras])
+    return farthest_point_views(centers, a.num_init_views)
+
+
+def fresh_state(scene: Scene, cfg: TrainConfig, train_views: list[int], total_iterations: int) -> TrainState:
+    pcd = scene.initial_point_cloud(cfg.model.num_random_points, cfg.run.seed)
+    gaussians = scene.new_gaussians(pcd, cfg.model.sh_degree, cfg.model.device)
+    optimizer = create_optimizer(gaussians, cfg.optim, scene.extent)
+    return TrainState(gaussians, optimizer, DensifyStrategy(cfg.densify, total_iterations), train_views=list(train_views))
+
+
+def training(cfg: TrainConfig) -> Path:
+    """Run (or resume) one training run; returns the model directory."""
+    model_path = cfg.model.model_path or default_model_path(cfg)
+    run_dir = RunDirectory(model_path)
+    if run_dir.is_complete() and not cfg.run.overwrite:
+        print(f"{model_path}: this run already finished (run_status.json says complete); "
+              "pass --overwrite to train it again")
+        return Path(model_path)
+    if cfg.run.overwrite:
+        run_dir.clear()
+    scene = Scene.load(cfg.model.source_path, model_path, white_background=cfg.model.white_background,
+                       resolution=cfg.model.resolution, eval=cfg.model.eval, images=cfg.model.images,
+                       device=cfg.model.device)
+    pool = len(scene.train_cameras)
+    a = cfg.active
+    if a.method:
+        num_init = len(a.init_views) or a.num_init_views
+        plan = plan_stages(num_init, a.views_per_step, a.max_views, pool, a.iters_per_view, cfg.run.iterations)
+    else:
+        plan = StagePlan((), (pool,), (cfg.run.iterations,), cfg.run.iterations)
+    background = torch.tensor([1.0, 1.0, 1.0] if cfg.model.white_background else [0.0, 0.0, 0.0],
+                              device=cfg.model.device)
+    settings = RasterSettings(tile_size=cfg.pipeline.tile_size)
+
+    seed_everything(cfg.run.seed)
+    rng = random.Random(cfg.run.seed)
+    checkpoint = run_dir.latest_checkpoint()
+    if checkpoint is not None:
+        state = fresh_state(scene, cfg, [], plan.total_iterations)
+        restore_state(state, checkpoint, cfg, scene)
+        rng.setstate(checkpoint["train_rng"])
+        set_rng_state(checkpoint["rng"])
+        print(f"{model_path}: resuming from iteration {state.iteration} (stage {state.stage})")
+    else:
+        train_views = seed_views(scene, cfg) if a.method else list(range(pool))
+        state = fresh_state(scene, cfg, train_views, plan.total_iterations)
+        run_dir.start(cfg.to_dict())
+        scene.write_cameras_json()
+        state.gaussians.save_ply(Path(model_path) / "input.ply")
+        if a.method:
+            remaining = plan.adds[-1] if plan.adds else 0
+            if plan.adds and remaining != a.views_per_step:
+                print(f"note: K={a.views_per_step} does not divide the remaining budget; "
+                      f"the last step adds {remaining} view(s)")
+
+    lr_schedule = PositionLRSchedule.from_config(cfg.optim, scene.extent)
+    progress = tqdm(total=plan.total_iterations, initial=state.iteration, disable=cfg.run.quiet,
+                    desc="training", dynamic_ncols=True)
+    extra_ckpts = set(cfg.run.checkpoint_iterations)
+    save_its = set(cfg.run.save_iterations) | {plan.total_iterations}
+    test_its = set(cfg.run.test_iterations)
+    while True:
+        stage_end = plan.stage_end[state.stage]
+        while state.iteration < stage_end:
+            cam = scene.train_cameras[next_view(state, rng)]
+            loss, train_psnr = training_step(state, cam, cfg, background, settings, lr_schedule, scene.extent)
+            progress.update(1)
+            if state.iteration % 10 == 0:
+                progress.set_postfix(loss=f"{loss:.4f}", psnr=f"{train_psnr:.2f}", gaussians=state.gaussians.num_gaussians,
+                                     views=len(state.train_views))
+            if state.iteration in test_its:
+                value = test_psnr(state.gaussians, scene.test_cameras, background, settings)
+                progress.write(f"[iter {state.iteration}] test PSNR {value:.2f} dB" if value is not None
+                               else f"[iter {state.iteration}] no test views (use --eval)")
+            if state.iteration in save_its:
+                scene.save_gaussians(state.gaussians, state.iteration)
+            if state.iteration in extra_ckpts:
+                run_dir.save_checkpoint(capture_state(state, rng, cfg))
+        if state.stage >= len(plan.adds):
+            break
+        k = plan.adds[state.stage]
+        progress.write(f"[stage {state.stage}] selecting {k} of {pool - len(state.train_views)} candidates "
+                       f"with {a.method}")
+        record = select_views(state, scene, cfg, k, background, settings)
+        state.stages.append(record)
+        state.train_views = state.train_views + record["selected"]
+        state.view_stack = []
+        state.stage += 1
+        if a.stage_reset:
+            reset = fresh_state(scene, cfg, state.train_views, plan.total_iterations)
+            state.gaussians, state.optimizer, state.strategy = reset.gaussians, reset.optimizer, reset.strategy
+        write_selection(run_dir, cfg, state)
+        run_dir.save_checkpoint(capture_state(state, rng, cfg))
+    progress.close()
+
+    final_psnr = test_psnr(state.gaussians, scene.test_cameras, background, settings)
+    if a.method:
+        write_selection(run_dir, cfg, state, final={"iteration": state.iteration, "train_views": state.train_views,
+                                                     "test_psnr": final_psnr})
+    run_dir.finish({"iteration": state.iteration, "num_gaussians": state.gaussians.num_gaussians,
+                    "train_views": state.train_views, "test_psnr": final_psnr})
+    msg = f"test PSNR {final_psnr:.2f} dB" if final_psnr is not None else "no test views (pass --eval for a test split)"
+    print(f"{model_path}: trained {state.iteration} iterations on {len(state.train_views)} views, "
+          f"{state.gaussians.num_gaussians} Gaussians, {msg}")
+    return Path(model_path)
+
+
+def write_selection(run_dir: RunDirectory, cfg: TrainConfig, state: TrainState,
+                    final: dict[str, Any] | None = None) -> None:
+    data: dict[str, Any] = {"config": {**config_to_dict(cfg.active), "seed": cfg.run.seed,
+                                       "iterations": cfg.run.iterations, "source_path": cfg.model.source_path},
+                            "stages": state.stages}
+    if final is not None:
+        data["final"] = final
+    write_json(run_dir.path / "selection.json", data)
+
+
+def capture_state(state: TrainState, rng: random.Random, cfg: TrainConfig) -> dict[str, Any]:
+    """The checkpoint: a named dict with a format version (see utils/checkpoint.py)."""
+    return {
+        "iteration": state.iteration, "stage": state.stage, "train_views": state.train_views,
+        "stages": state.stages, "view_stack": state.view_stack,
+        "model": state.gaussians.state_dict(), "optimizer": state.optimizer.state_dict(),
+        "densify": state.strategy.state_dict(), "rng": rng_state(), "train_rng": rng.getstate(),
+        "config": cfg.to_dict(),
+    }
+
+
+def restore_state(state: TrainState, ckpt: dict[str, Any], cfg: TrainConfig, scene: Scene) -> None:
+    state.gaussians.load_state_dict(ckpt["model"])
+    state.optimizer = create_optimizer(state.gaussians, cfg.optim, scene.extent)
+    state.optimizer.load_state_dict(ckpt["optimizer"])
+    state.strategy.load_state_dict(ckpt["densify"])
+    state.iteration, state.stage = ckpt["iteration"], ckpt["stage"]
+    state.train_views, state.stages, state.view_stack = ckpt["train_views"], ckpt["stages"], ckpt["view_stack"]
+
+
+def main() -> None:
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    cfg = parse_config()
+    torch.set_num_threads(torch.get_num_threads())
+    training(cfg)
+
+
+if __name__ == "__main__":
+    run_cli(main)

@@ -1,7 +1,8 @@
-"""Shared test set-up: repository root on sys.path, the shared data directory, a fixed seed."""
+"""Shared test set-up: repository root on sys.path, the shared data directory, tiny generated datasets."""
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -27,3 +28,17 @@ def shared_dir() -> Path:
     if not SHARED.is_dir():
         pytest.skip(f"shared data not found at {SHARED} (set LITEGS_SHARED)")
     return SHARED
+
+
+@pytest.fixture(scope="session")
+def tiny_scene(tmp_path_factory) -> Path:
+    """A 32 px built-in scene with 14 training and 4 test views (generated once per session)."""
+    from scene.builtin import make_builtin_scene
+    return make_builtin_scene(tmp_path_factory.mktemp("data") / "tiny", seed=0, resolution=32, num_train=14,
+                              num_test=4)
+
+
+def run_cli(*args: str, cwd: Path = ROOT, timeout: int = 240) -> subprocess.CompletedProcess:
+    """Run one of the project's CLIs with the test interpreter; returns the completed process."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, *args], cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)

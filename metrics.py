@@ -65,10 +65,11 @@ def evaluate_method(method_dir: Path, lpips_model, quiet: bool = False) -> dict[
 
 def evaluate(model_dirs: list[str], lpips_weights: str | None = None, quiet: bool = False) -> dict[str, dict]:
     """Evaluate every model directory found under `model_dirs`; returns {model_dir: results}."""
+    found = find_model_dirs(model_dirs)
     loaded = load_lpips(lpips_weights)
     lpips_model, variant = loaded if loaded is not None else (None, None)
     all_results = {}
-    for model_dir in find_model_dirs(model_dirs):
+    for model_dir in found:
         results, per_view_all = {}, {}
         for method_dir in sorted((model_dir / "test").glob("ours_*")):
             per_view = evaluate_method(method_dir, lpips_model, quiet)

@@ -73,14 +73,15 @@ def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Te
     b = cov2d[:, 0, 1]
     c = cov2d[:, 1, 1] + dilation
     det = a * c - b * b
-    valid = in_front & (det > 0)
+    valid = in_front & (det > 0) & torch.isfinite(det) & torch.isfinite(t).all(dim=-1)  # non-finite: culled
     det_safe = torch.where(valid, det, torch.ones_like(det))
     conics = torch.stack([c / det_safe, -b / det_safe, a / det_safe], dim=-1)
     means2d = torch.stack([fx * t[:, 0] / z_safe + cx, fy * t[:, 1] / z_safe + cy], dim=-1)
     with torch.no_grad():
         mid = 0.5 * (a + c)
         lam_max = mid + torch.sqrt(torch.clamp_min(mid * mid - det_safe, 0.1))
-        radii = torch.ceil(3.0 * torch.sqrt(lam_max)).to(torch.int64)
+        radii = torch.ceil(3.0 * torch.sqrt(lam_max)).clamp_max(1e6)
+        radii = torch.where(torch.isfinite(radii), radii, torch.zeros_like(radii)).to(torch.int64)
         mx, my = means2d[:, 0], means2d[:, 1]
         on_screen = (mx + radii > 0) & (mx - radii < width) & (my + radii > 0) & (my - radii < height)
         radii = torch.where(valid & on_screen, radii, torch.zeros_like(radii))

@@ -1,0 +1,154 @@
+"""The bad-input catalogue: every case exits non-zero with one `error:` line on stderr that names the problem,
+no traceback, and no output directory that looks complete."""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+from PIL import Image
+
+from tests.conftest import ROOT, run_cli
+
+TRAIN_FAST = ["--iterations", "5", "--num_random_points", "200", "--quiet"]
+ACTIVE = ["--method", "lite_gs", "--num_init_views", "2", "--views_per_step", "2", "--max_views", "6",
+          "--iters_per_view", "1"]
+
+
+def copy_scene(tiny_scene: Path, dest: Path) -> Path:
+    shutil.copytree(tiny_scene, dest)
+    return dest
+
+
+def setup_missing_source(tiny_scene, tmp):
+    return ["train.py", "-s", str(tmp / "nope"), "-m", str(tmp / "m")], "does not exist"
+
+
+def setup_empty_source(tiny_scene, tmp):
+    (tmp / "empty").mkdir()
+    return ["train.py", "-s", str(tmp / "empty"), "-m", str(tmp / "m")], "empty"
+
+
+def setup_unknown_layout(tiny_scene, tmp):
+    (tmp / "junk").mkdir()
+    (tmp / "junk" / "notes.txt").write_text("hello")
+    return ["train.py", "-s", str(tmp / "junk"), "-m", str(tmp / "m")], "neither a Blender"
+
+
+def setup_malformed_json(tiny_scene, tmp):
+    scene = copy_scene(tiny_scene, tmp / "s")
+    (scene / "transforms_train.json").write_text('{"frames": [')
+    return ["train.py", "-s", str(scene), "-m", str(tmp / "m")], "not valid JSON"
+
+
+def setup_missing_key(tiny_scene, tmp):
+    scene = copy_scene(tiny_scene, tmp / "s")
+    data = json.loads((scene / "transforms_train.json").read_text())
+    del data["frames"][3]["transform_matrix"]
+    (scene / "transforms_train.json").write_text(json.dumps(data))
+    return ["train.py", "-s", str(scene), "-m", str(tmp / "m")], "frame 3"
+
+
+def setup_missing_image(tiny_scene, tmp):
+    scene = copy_scene(tiny_scene, tmp / "s")
+    (scene / "train" / "r_5.png").unlink()
+    return ["train.py", "-s", str(scene), "-m", str(tmp / "m")], "r_5.png is missing"
+
+
+def setup_mixed_sizes(tiny_scene, tmp):
+    scene = copy_scene(tiny_scene, tmp / "s")
+    Image.new("RGBA", (20, 20)).save(scene / "train" / "r_2.png")
+    return ["train.py", "-s", str(scene), "-m", str(tmp / "m")], "one size"
+
+
+def setup_bad_resolution(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), "-r", "0"], "--resolution"
+
+
+def setup_eps(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--eps", "1.5"], "--eps"
+
+
+def setup_k_zero(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--views_per_step", "0"], "--views_per_step"
+
+
+def setup_budget_over_pool(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--max_views", "50"], "--max_views"
+
+
+def setup_seed_set_over_pool(tiny_scene, tmp):
+    return (["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--num_init_views", "14",
+             "--max_views", "14"], "--num_init_views")
+
+
+def setup_unknown_method(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), "--method", "greedy"], "choose one of"
+
+
+def setup_non_finite_loss(tiny_scene, tmp):
+    # An infinite colour learning rate turns the SH coefficients into inf/NaN after the first Adam step.
+    return (["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *TRAIN_FAST, "--feature_lr", "inf"],
+            "non-finite at iteration")
+
+
+def setup_unwritable_output(tiny_scene, tmp):
+    (tmp / "a_file").write_text("x")
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "a_file" / "m"), *TRAIN_FAST], "cannot write"
+
+
+def setup_corrupt_checkpoint(tiny_scene, tmp):
+    model = tmp / "m"
+    (model / "checkpoints").mkdir(parents=True)
+    (model / "run_status.json").write_text('{"status": "running"}')
+    (model / "checkpoints" / "chkpnt_0000010.pt").write_bytes(b"PK\x03\x04 truncated")
+    return ["train.py", "-s", str(tiny_scene), "-m", str(model), *TRAIN_FAST], "corrupt or truncated"
+
+
+def setup_corrupt_ply(tiny_scene, tmp):
+    model = tmp / "m"
+    (model / "point_cloud" / "iteration_5").mkdir(parents=True)
+    (model / "point_cloud" / "iteration_5" / "point_cloud.ply").write_bytes(b"ply\nformat ascii 1.0\nelement")
+    (model / "cfg_args").write_text(json.dumps({"model": {"source_path": str(tiny_scene), "eval": True},
+                                                "pipeline": {}}))
+    return ["render.py", "-m", str(model), "--quiet"], "cannot read PLY"
+
+
+def setup_metrics_no_renders(tiny_scene, tmp):
+    (tmp / "m").mkdir()
+    return ["metrics.py", "-m", str(tmp / "m")], "no rendered test views"
+
+
+def setup_truncated_selection(tiny_scene, tmp):
+    run = tmp / "out" / "setup1" / "lego" / "lite_gs" / "seed0"
+    run.mkdir(parents=True)
+    (run / "selection.json").write_text('{"config": {"method": "lite_gs"}, "stages": [{"stage": 0, ')
+    return ["scripts/summarize.py", str(tmp / "out")], "truncated"
+
+
+def setup_script_missing_scene(tiny_scene, tmp):
+    (tmp / "data" / "ship").mkdir(parents=True)
+    return ["bash", "scripts/setup1.sh", "--data", str(tmp / "data"), "--scenes", "lego", "--out",
+            str(tmp / "out")], "scenes in"
+
+
+CASES = {name[len("setup_"):]: fn for name, fn in globals().items() if name.startswith("setup_")}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_bad_input_fails_cleanly(case, tiny_scene, tmp_path):
+    args, needle = CASES[case](tiny_scene, tmp_path)
+    if args[0] == "bash":
+        r = subprocess.run(args, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    else:
+        r = run_cli(*args)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode != 0, f"{case}: exit 0\n{r.stdout}"
+    assert "Traceback" not in r.stderr, r.stderr
+    assert len(lines) == 1 and lines[0].startswith("error: "), r.stderr
+    assert needle in lines[0], lines[0]
+    for status in tmp_path.rglob("run_status.json"):
+        assert json.loads(status.read_text())["status"] != "complete"
+    assert not list(tmp_path.rglob("results.json"))

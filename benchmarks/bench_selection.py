@@ -1,0 +1,137 @@
+"""Selection cost: Fisher blocks vs a training step, one oracle, and pop_gs vs lite_gs over K and eps.
+
+    python benchmarks/bench_selection.py --model output/quickstart --mode cached
+    python benchmarks/bench_selection.py --model output/quickstart --mode streaming --ks 3
+
+Uses a trained model directory (default: the quickstart's) and its dataset; the seed views are chosen by
+farthest-point sampling (2 of the pool, so M = 98 candidates on the built-in scene). Modes:
+  cached     every candidate's blocks are computed once (timed apart) and a gain is a batched log-det update;
+  streaming  nothing is kept: every oracle recomputes that view's blocks (the memory-lean mode).
+Peak resident memory of the process is printed at the end; run the two modes as separate processes to compare.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import resource
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import active  # noqa: E402,F401  (registers the selectors)
+from active.base import SelectionContext  # noqa: E402
+from active.fisher import fisher_view_blocks  # noqa: E402
+from active.logdet import BlockGainOracle, BlockInformation  # noqa: E402
+from active.registry import build_selector  # noqa: E402
+from active.schedule import farthest_point_views  # noqa: E402
+from gaussian_renderer import RasterSettings, render  # noqa: E402
+from render import find_iteration, load_model_config  # noqa: E402
+from scene.gaussian_model import GaussianModel  # noqa: E402
+from scene.scene import Scene  # noqa: E402
+from utils.losses import l1_loss, ssim  # noqa: E402
+
+
+def median_time(fn, items) -> float:
+    times = []
+    for item in items:
+        t0 = time.perf_counter()
+        fn(item)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--model", default="output/quickstart", help="trained model directory")
+    parser.add_argument("--mode", choices=("cached", "streaming"), default="cached")
+    parser.add_argument("--ks", type=int, nargs="+", default=[3, 4, 6])
+    parser.add_argument("--eps", type=float, nargs="+", default=[0.1, 0.3, 0.6])
+    parser.add_argument("--num_init_views", type=int, default=2)
+    args = parser.parse_args()
+
+    model_path = Path(args.model)
+    model_cfg, pipeline_cfg = load_model_config(model_path)
+    scene = Scene.load(model_cfg.source_path, model_path, white_background=model_cfg.white_background,
+                       resolution=model_cfg.resolution, eval=model_cfg.eval, images=model_cfg.images)
+    gaussians = GaussianModel.load_ply(model_path / "point_cloud" / f"iteration_{find_iteration(model_path, -1)}"
+                                       / "point_cloud.ply")
+    cams = scene.train_cameras
+    bg = torch.tensor([1.0] * 3 if model_cfg.white_background else [0.0] * 3)
+    settings = RasterSettings(tile_size=pipeline_cfg.tile_size)
+    seeds = farthest_point_views(torch.stack([c.camera_center for c in cams]), args.num_init_views)
+    candidates = [v for v in range(len(cams)) if v not in seeds]
+
+    def train_step(v):
+        out = render(cams[v], gaussians, bg, settings)
+        loss = 0.8 * l1_loss(out.image, cams[v].image) + 0.2 * (1 - ssim(out.image, cams[v].image))
+        loss.backward()
+
+    def blocks(v):
+        return fisher_view_blocks(gaussians, cams[v], bg, settings)
+
+    sample = candidates[:: max(1, len(candidates) // 6)][:6]
+    train_step(sample[0])
+    t_step = median_time(train_step, sample)
+    t_fisher = median_time(blocks, sample)
+    prior = sum(blocks(v) for v in seeds)
+    info = BlockInformation(prior)
+    some_blocks = blocks(candidates[0])
+    t_gain = median_time(lambda _: info.gain(some_blocks), range(5))
+    print(f"model {model_path}: {gaussians.num_gaussians} Gaussians, {cams[0].width}x{cams[0].height}, "
+          f"M = {len(candidates)} candidates, torch {torch.__version__}, {torch.get_num_threads()} threads")
+    print(f"one training step (fwd+bwd+loss): {1e3 * t_step:.1f} ms | one view's Fisher blocks: "
+          f"{1e3 * t_fisher:.1f} ms ({t_fisher / t_step:.2f}x a step) | one gain on cached blocks: "
+          f"{1e3 * t_gain:.1f} ms")
+
+    cache, t_cache = {}, 0.0
+    if args.mode == "cached":
+        t0 = time.perf_counter()
+        cache = {v: blocks(v) for v in candidates}
+        t_cache = time.perf_counter() - t0
+        size_mb = sum(b.numel() * b.element_size() for b in cache.values()) / 2**20
+        print(f"cache: {len(cache)} views, {size_mb:.0f} MB, built in {t_cache:.1f} s")
+
+    rows = []
+    configs = [("pop_gs", None)] + [("lite_gs", e) for e in args.eps]
+    for k in args.ks:
+        for method, eps in configs:
+            computed = set()
+
+            def provider(v):
+                computed.add(v)
+                return cache[v] if cache else blocks(v)
+
+            oracle = BlockGainOracle(BlockInformation(prior), provider)
+            ctx = SelectionContext(candidates, oracle, torch.Generator().manual_seed(0), 0)
+            t0 = time.perf_counter()
+            sel = build_selector(method, **({"eps": eps} if eps else {})).select(ctx, k)
+            rows.append({"K": k, "method": method, "eps": eps, "conservative": sel.oracle_calls.conservative,
+                         "evaluated": sel.oracle_calls.evaluated, "views_computed": len(computed),
+                         "select_s": time.perf_counter() - t0})
+    print(f"\n{args.mode} mode{' (cache build excluded, see above)' if cache else ''}")
+    print(f"{'K':>2} {'method':8} {'eps':>4} {'conserv.':>8} {'evaluated':>9} {'views':>5} {'select s':>9} "
+          f"{'time/pop':>8} {'evals/pop':>9}")
+    for r in rows:
+        pop = next(p for p in rows if p["K"] == r["K"] and p["method"] == "pop_gs")
+        print(f"{r['K']:2d} {r['method']:8} {'' if r['eps'] is None else r['eps']:>4} {r['conservative']:8d} "
+              f"{r['evaluated']:9d} {r['views_computed']:5d} {r['select_s']:9.2f} "
+              f"{r['select_s'] / pop['select_s']:8.3f} {r['evaluated'] / pop['evaluated']:9.3f}")
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"\npeak resident memory of this process: {peak_mb:.0f} MB")
+    out = Path(__file__).parent / "results" / f"selection_{args.mode}_{time.strftime('%Y%m%d_%H%M%S')}.json"
+    out.parent.mkdir(exist_ok=True)
+    out.write_text(json.dumps({"machine": platform.platform(), "torch": torch.__version__, "mode": args.mode,
+                               "gaussians": gaussians.num_gaussians, "train_step_s": t_step,
+                               "fisher_view_s": t_fisher, "gain_s": t_gain, "cache_build_s": t_cache,
+                               "peak_rss_mb": peak_mb, "rows": rows}, indent=2))
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -301,7 +301,8 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
 
     G_i = sum_pixels sum_channels (dC_pc / da_i)(dC_pc / da_i)^T, a_i = (mean x, y, conic a, b, c, opacity, colour).
     Per pair the Jacobian is [u v^T | w I] with u = dC/dalpha [D], v = dalpha/d(geometry) [6], w = alpha T, so the
-    Gram is [[|u|^2 v v^T, w v u^T], [w u v^T, w^2 I]]; it is summed over a tile's pixels before the scatter.
+    Gram is [[|u|^2 v v^T, w v u^T], [w u v^T, w^2 I]]; it is summed over a tile's pixels (in the input dtype)
+    before a float64 scatter per Gaussian.
 
     Returns:
         float64 Gram matrices. [N, A, A], A = 6 + D
@@ -313,24 +314,27 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
     bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
     final_color, _ = _composite(bins, means2d, conics, opacities, colors, background, settings)
     prefix = torch.zeros_like(final_color)
-    gram = torch.zeros(n, geo + d, geo + d, dtype=torch.float64, device=means2d.device)
+    # Per Gaussian: sum of |u|^2 v v^T (6x6), w v u^T (6xD) and w^2, accumulated in float64 across tiles.
+    sums = torch.zeros(n, geo * geo + geo * d + 1, dtype=torch.float64, device=means2d.device)
     for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
-        u = _color_alpha_partials(chunk, colors, final_color, prefix).double()  # [Ta, P, c, D]
-        v = _alpha_partials(chunk, conics).double()  # [T, P, c, 6]
-        w = chunk.weight.double()  # [T, P, c]
+        u = _color_alpha_partials(chunk, colors, final_color, prefix)  # [Ta, P, c, D]
+        v = _alpha_partials(chunk, conics)  # [Ta, P, c, 6]
+        w = chunk.weight  # [Ta, P, c]
         t, p, c = w.shape
-        uu = (u * u).sum(-1)  # [T, P, c]
-        v_t = v.permute(0, 2, 1, 3).reshape(t * c, p, geo)  # [T*c, P, 6]
-        vv = torch.bmm((uu.permute(0, 2, 1).reshape(t * c, p, 1) * v_t).transpose(1, 2), v_t)  # [T*c, 6, 6]
+        v_t = v.permute(0, 2, 1, 3).reshape(t * c, p, geo)  # [Ta*c, P, 6]
+        uu = (u * u).sum(-1).permute(0, 2, 1).reshape(t * c, p, 1)
+        vv = torch.bmm((uu * v_t).transpose(1, 2), v_t)  # [Ta*c, 6, 6], summed over the tile's pixels
         wu = (w[..., None] * u).permute(0, 2, 1, 3).reshape(t * c, p, d)
-        vu = torch.bmm(v_t.transpose(1, 2), wu)  # [T*c, 6, D]
-        ww = (w * w).sum(1).reshape(t * c)  # [T*c]
-        block = torch.zeros(t * c, geo + d, geo + d, dtype=torch.float64, device=gram.device)
-        block[:, :geo, :geo] = vv
-        block[:, :geo, geo:] = vu
-        block[:, geo:, :geo] = vu.transpose(1, 2)
-        block[:, geo:, geo:] = ww[:, None, None] * torch.eye(d, dtype=torch.float64, device=gram.device)
-        gram += _scatter_rows(block.reshape(t, c, geo + d, geo + d), chunk.ids, n)
+        vu = torch.bmm(v_t.transpose(1, 2), wu)  # [Ta*c, 6, D]
+        ww = (w * w).sum(1).reshape(t * c, 1)
+        rows = torch.cat([vv.reshape(t * c, -1), vu.reshape(t * c, -1), ww], dim=1).double()
+        sums += _scatter_rows(rows.reshape(t, c, -1), chunk.ids, n)
+    gram = torch.zeros(n, geo + d, geo + d, dtype=torch.float64, device=means2d.device)
+    gram[:, :geo, :geo] = sums[:, :geo * geo].reshape(n, geo, geo)
+    vu_all = sums[:, geo * geo:geo * geo + geo * d].reshape(n, geo, d)
+    gram[:, :geo, geo:] = vu_all
+    gram[:, geo:, :geo] = vu_all.transpose(1, 2)
+    gram[:, geo:, geo:] = sums[:, -1, None, None] * torch.eye(d, dtype=torch.float64, device=means2d.device)
     return gram
 
 

@@ -1,31 +1,38 @@
-"""Aggregate experiment runs into paper-style tables (summary.md, summary.csv) and plots.
+"""Aggregate experiment runs into paper-style tables (summary.md, summary.csv) and plots (PNG).
 
     python scripts/summarize.py output/experiments/setup1 [more roots...] [--out DIR]
 
-A run is a model directory with `selection.json`; its setup and scene are read from the layout the experiment
-scripts write (OUT/<setup>/<scene>/<tag>/seed<S>), its method, K and eps from its selection.json.
+A run is a model directory holding selection.json, run_status.json or cfg_args. Its setup and scene come from the
+layout the experiment scripts write (OUT/<setup>/<scene>/<tag>/seed<S>); its method, K, eps and seed from
+selection.json (or cfg_args before the first acquisition step). A run without results.json is listed as incomplete.
 """
 from __future__ import annotations
 
 import argparse
 import csv
 import json
+import logging
 import math
 import re
 import sys
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
-from statistics import mean, pstdev
+from statistics import mean, stdev
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from utils.errors import UserError, run_cli  # noqa: E402
 from utils.io import atomic_write  # noqa: E402
 
+log = logging.getLogger("summarize")
+MARKERS = ("selection.json", "run_status.json", "cfg_args")  # any of these makes a directory a run
+EPS_METHODS = ("lite_gs", "ssg")  # methods whose behaviour depends on eps
+
 
 @dataclass
 class Run:
+    """One model directory, as far as it could be read."""
     path: Path
     setup: str
     scene: str
@@ -33,143 +40,213 @@ class Run:
     k: int
     eps: float
     seed: int
-    stages: list[dict]
-    final: dict | None
-    results: dict | None  # the newest ours_N of results.json
-    cameras: list[dict] = field(default_factory=list)
+    stages: list[dict] = field(default_factory=list)  # selection.json "stages"
+    final: dict | None = None  # selection.json "final" (train_views, test_psnr after the last stage)
+    results: dict | None = None  # the newest ours_N entry of results.json
+    cameras: list[dict] = field(default_factory=list)  # cameras.json (train cameras)
+    problem: str = ""  # why the run has no results yet ("" when complete)
 
     @property
     def setting(self) -> str:
-        """Method label with the settings that vary within a setup."""
+        """Method label with the settings that vary within a setup (K always, eps for eps-dependent methods)."""
         label = f"{self.method} K={self.k}"
-        return label + (f" eps={self.eps:g}" if self.method in ("lite_gs", "ssg") else "")
+        return label + (f" eps={self.eps:g}" if self.method in EPS_METHODS else "")
 
 
-def _read_json(path: Path, what: str):
+def _read_json(path: Path):
+    """Parsed JSON, or None (with a warning) when the file is unreadable or truncated."""
     try:
         return json.loads(path.read_text())
-    except ValueError:
-        raise UserError(f"{path} is truncated or not valid JSON; rerun that {what} (delete the file to skip it)") from None
+    except (OSError, ValueError) as exc:
+        log.warning("skipping unreadable %s (%s)", path, type(exc).__name__)
+        return None
 
 
-def load_run(selection_file: Path) -> Run:
-    model = selection_file.parent
-    sel = _read_json(selection_file, "training run")
-    if not isinstance(sel, dict) or "config" not in sel or "stages" not in sel:
-        raise UserError(f"{selection_file} lacks 'config'/'stages'; it was not written by train.py")
-    cfg = sel["config"]
-    parts = model.parts
-    setup_idx = next((i for i in range(len(parts) - 1, -1, -1)
-                      if re.fullmatch(r"setup\d+|ablation_\w+", parts[i])), None)
-    setup = parts[setup_idx] if setup_idx is not None else model.parent.name
-    scene = parts[setup_idx + 1] if setup_idx is not None and setup_idx + 1 < len(parts) else "scene"
-    results = None
-    if (model / "results.json").is_file():
-        all_results = _read_json(model / "results.json", "metrics.py")
-        if all_results:
-            newest = max(all_results, key=lambda k: int(k.split("_")[-1]))
-            results = all_results[newest]
-    cameras = _read_json(model / "cameras.json", "training run") if (model / "cameras.json").is_file() else []
-    return Run(model, setup, scene, cfg["method"], int(cfg["views_per_step"]), float(cfg["eps"]),
-               int(cfg.get("seed", 0)), sel["stages"], sel.get("final"), results, cameras)
+def _layout(model: Path) -> tuple[str, str]:
+    """(setup, scene) from OUT/<setup>/<scene>/<tag>/seed<S>; falls back to the directory's ancestors."""
+    parts = model.resolve().parts
+    for i in range(len(parts) - 2, -1, -1):
+        if re.fullmatch(r"setup\d+|ablation_\w+", parts[i]):
+            return parts[i], parts[i + 1]
+    return (parts[-4] if len(parts) >= 4 else "-"), (parts[-3] if len(parts) >= 3 else "-")
+
+
+def load_run(model: Path) -> Run:
+    """Read one model directory; never raises for missing or unreadable pieces (they become `problem`)."""
+    setup, scene = _layout(model)
+    sel = _read_json(model / "selection.json") if (model / "selection.json").is_file() else None
+    cfg_args = _read_json(model / "cfg_args") if (model / "cfg_args").is_file() else None
+    if isinstance(sel, dict) and isinstance(sel.get("config"), dict):
+        cfg = sel["config"]
+    elif isinstance(cfg_args, dict):
+        cfg = {**cfg_args.get("active", {}), **cfg_args.get("run", {})}
+    else:
+        cfg = {}
+    run = Run(model, setup, scene, str(cfg.get("method") or "?"), int(cfg.get("views_per_step", 0)),
+              float(cfg.get("eps", math.nan)), int(cfg.get("seed", -1)))
+    if isinstance(sel, dict):
+        run.stages = [s for s in sel.get("stages", []) if isinstance(s, dict)]
+        run.final = sel.get("final")
+    cameras = _read_json(model / "cameras.json") if (model / "cameras.json").is_file() else None
+    run.cameras = cameras if isinstance(cameras, list) else []
+    results = _read_json(model / "results.json") if (model / "results.json").is_file() else None
+    entries = {k: v for k, v in (results or {}).items() if re.fullmatch(r"ours_\d+", k) and isinstance(v, dict)}
+    if entries:
+        run.results = entries[max(entries, key=lambda k: int(k.split("_")[1]))]
+    elif not cfg:
+        run.problem = "no readable selection.json or cfg_args"
+    else:
+        status = _read_json(model / "run_status.json") if (model / "run_status.json").is_file() else None
+        state = status.get("status", "?") if isinstance(status, dict) else "not started"
+        run.problem = "no results.json (training " + ("complete: render + metrics missing" if state == "complete"
+                                                     else f"{state}, {len(run.stages)} step(s) done") + ")"
+    return run
 
 
 def find_runs(roots: list[str]) -> list[Run]:
-    files = []
+    """Every run below the roots (searched recursively), each once, in path order."""
+    dirs: set[Path] = set()
     for root in roots:
-        if not Path(root).exists():
-            raise UserError(f"{root} does not exist; pass the output root of an experiment script")
-        files += sorted(Path(root).rglob("selection.json"))
-    if not files:
-        raise UserError(f"no runs (selection.json) under {', '.join(roots)}; run an experiment script first")
-    return [load_run(f) for f in files]
+        if not Path(root).is_dir():
+            raise UserError(f"{root} is not a directory; pass the output root of an experiment script")
+        for marker in MARKERS:
+            dirs.update(p.parent.resolve() for p in Path(root).rglob(marker))
+    if not dirs:
+        raise UserError(f"no runs (selection.json / run_status.json) under {', '.join(roots)}; "
+                        "run an experiment script first")
+    return [load_run(d) for d in sorted(dirs)]
 
 
-def per_step_oracles(run: Run, kind: str) -> int:
-    """Oracle evaluations per acquisition step, averaged over steps and rounded up (as the paper reports)."""
-    counts = [s["oracle_calls"][kind] for s in run.stages]
-    return math.ceil(sum(counts) / len(counts)) if counts else 0
-
-
-def _fmt(values: list[float], digits: int) -> str:
+def mean_std(values: list[float]) -> tuple[float | None, float | None]:
+    """(mean, sample standard deviation); std is None for fewer than two values, both None for none."""
     if not values:
-        return "n/a"
-    return f"{mean(values):.{digits}f} ± {pstdev(values):.{digits}f}" if len(values) > 1 else f"{values[0]:.{digits}f}"
+        return None, None
+    return mean(values), (stdev(values) if len(values) > 1 else None)
+
+
+def per_step_count(runs: list[Run], kind: str) -> int | None:
+    """Oracle evaluations per acquisition step, averaged over all steps of the runs, rounded up (the paper's way)."""
+    counts = [s["oracle_calls"][kind] for r in runs for s in r.stages if "oracle_calls" in s]
+    return math.ceil(sum(counts) / len(counts)) if counts else None
 
 
 def quality_rows(runs: list[Run]) -> list[dict]:
+    """Setup x method setting: PSNR / SSIM / LPIPS mean and std over the complete runs (seeds and scenes)."""
     groups: dict[tuple, list[Run]] = defaultdict(list)
     for r in runs:
         groups[(r.setup, r.setting)].append(r)
     rows = []
     for (setup, setting), group in sorted(groups.items()):
-        done = [r for r in group if r.results]
-        lpips = [r.results["LPIPS"] for r in done if r.results.get("LPIPS") is not None]
-        variant = next((r.results.get("LPIPS_variant") for r in done if r.results.get("LPIPS_variant")), None)
-        rows.append({
-            "setup": setup, "method": setting, "runs": len(done), "incomplete": len(group) - len(done),
-            "scenes": " ".join(sorted({r.scene for r in group})),
-            "PSNR": _fmt([r.results["PSNR"] for r in done], 2), "SSIM": _fmt([r.results["SSIM"] for r in done], 4),
-            "LPIPS": _fmt(lpips, 4) + (f" ({variant})" if lpips else ""),
-            "select_s": _fmt([sum(s["select_seconds"] for s in r.stages) for r in group], 1),
-            "fisher_s": _fmt([sum(s["fisher_seconds"] for s in r.stages) for r in group], 1),
-        })
+        done = [r.results for r in group if r.results is not None]
+        row = {"setup": setup, "method": setting, "scenes": " ".join(sorted({r.scene for r in group})),
+               "runs": len(done), "incomplete": len(group) - len(done)}
+        for metric in ("PSNR", "SSIM", "LPIPS"):
+            values = [float(d[metric]) for d in done if isinstance(d.get(metric), (int, float))]
+            row[f"{metric}_mean"], row[f"{metric}_std"] = mean_std(values)
+        row["LPIPS_variant"] = next((d["LPIPS_variant"] for d in done
+                                     if d.get("LPIPS") is not None and d.get("LPIPS_variant")), "")
+        rows.append(row)
     return rows
 
 
 def oracle_rows(runs: list[Run]) -> list[dict]:
-    """Setup x (K, eps): per-step oracle counts of every oracle-based method, and lite_gs's reduction vs pop_gs."""
-    groups: dict[tuple, dict[str, list[Run]]] = defaultdict(lambda: defaultdict(list))
+    """Setup x scene x K x (method, eps): oracle evaluations per step and the reduction relative to pop_gs."""
+    groups: dict[tuple, dict[tuple, list[Run]]] = defaultdict(lambda: defaultdict(list))
     for r in runs:
-        if r.method != "random":
-            key_eps = r.eps if r.method in ("lite_gs", "ssg") else None
-            groups[(r.setup, r.k)][(r.method, key_eps)].append(r)
+        if r.method != "random" and r.stages:
+            groups[(r.setup, r.scene, r.k)][(r.method, r.eps if r.method in EPS_METHODS else None)].append(r)
     rows = []
-    for (setup, k), by_method in sorted(groups.items()):
+    for (setup, scene, k), by_method in sorted(groups.items()):
         pop = by_method.get(("pop_gs", None), [])
-        pop_cons = max((per_step_oracles(r, "conservative") for r in pop), default=None)
-        for (method, eps), group in sorted(by_method.items(), key=lambda kv: (kv[0][0], kv[0][1] or 0)):
-            cons = max(per_step_oracles(r, "conservative") for r in group)
-            ev = max(per_step_oracles(r, "evaluated") for r in group)
-            rows.append({
-                "setup": setup, "K": k, "method": method, "eps": "" if eps is None else f"{eps:g}",
-                "conservative": cons, "evaluated": ev,
-                "reduction_vs_pop_gs_%": "" if pop_cons in (None, 0) or method == "pop_gs"
-                else f"{100 * (1 - cons / pop_cons):.2f}",
-            })
+        pop_count = per_step_count(pop, "conservative")
+        for (method, eps), group in sorted(by_method.items(), key=lambda kv: (kv[0][0], kv[0][1] or 0.0)):
+            cons, evaluated = per_step_count(group, "conservative"), per_step_count(group, "evaluated")
+            reduction = (100.0 * (1.0 - cons / pop_count) if pop_count and method != "pop_gs" and cons is not None
+                         else None)
+            rows.append({"setup": setup, "scene": scene, "K": k, "method": method,
+                         "eps": "" if eps is None else f"{eps:g}", "runs": len(group),
+                         "steps": sum(len(r.stages) for r in group), "conservative": cons,
+                         "evaluated": evaluated, "reduction_%": reduction})
     return rows
 
 
-def markdown_table(rows: list[dict]) -> str:
+def time_rows(runs: list[Run]) -> list[dict]:
+    """Setup x method setting: selection wall time (select_seconds, which includes the Fisher blocks) and the
+    Fisher part, per run and per acquisition step."""
+    groups: dict[tuple, list[Run]] = defaultdict(list)
+    for r in runs:
+        if r.stages:
+            groups[(r.setup, r.setting)].append(r)
+    rows = []
+    for (setup, setting), group in sorted(groups.items()):
+        steps = [s for r in group for s in r.stages]
+        row = {"setup": setup, "method": setting, "runs": len(group), "steps": len(steps)}
+        row["select_s_per_run_mean"], row["select_s_per_run_std"] = mean_std(
+            [sum(float(s.get("select_seconds", 0.0)) for s in r.stages) for r in group])
+        row["fisher_s_per_run_mean"], row["fisher_s_per_run_std"] = mean_std(
+            [sum(float(s.get("fisher_seconds", 0.0)) for s in r.stages) for r in group])
+        row["select_s_per_step"] = mean(float(s.get("select_seconds", 0.0)) for s in steps)
+        rows.append(row)
+    return rows
+
+
+def _cell(row: dict, col: str, digits: int) -> str:
+    """Markdown cell: 'mean ± std' for a *_mean column (std omitted when undefined), plain value otherwise."""
+    value = row[col]
+    if value is None:
+        return "n/a"
+    if isinstance(value, float):
+        text = f"{value:.{digits}f}"
+        std = row.get(col[:-5] + "_std") if col.endswith("_mean") else None
+        return text + (f" ± {std:.{digits}f}" if std is not None else "")
+    return str(value)
+
+
+def markdown_table(rows: list[dict], digits: dict[str, int]) -> str:
+    """Rows as a markdown table; *_std columns fold into their *_mean column, headers lose the _mean suffix."""
     if not rows:
         return "(none)\n"
-    cols = list(rows[0])
-    lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
-    lines += ["| " + " | ".join(str(r[c]) for c in cols) + " |" for r in rows]
+    cols = [c for c in rows[0] if not c.endswith("_std")]
+    head = [c[:-5] if c.endswith("_mean") else c for c in cols]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in cols) + "|"]
+    for row in rows:
+        lines.append("| " + " | ".join(_cell(row, c, digits.get(c.split("_")[0], 2)) for c in cols) + " |")
     return "\n".join(lines) + "\n"
 
 
 def write_outputs(runs: list[Run], out: Path) -> list[Path]:
+    """Write summary.md, summary.csv and the plots into `out`; returns the files written."""
     from utils import plots
 
     out.mkdir(parents=True, exist_ok=True)
-    quality, oracles = quality_rows(runs), oracle_rows(runs)
-    md = ["# Summary", "", f"{len(runs)} runs from {len({r.setup for r in runs})} setup(s).", "",
-          "## Quality (test views, mean ± std over seeds and scenes)", "", markdown_table(quality),
-          "## Oracle evaluations per acquisition step (averaged over steps, rounded up)", "",
-          markdown_table(oracles)]
+    quality, oracles, times = quality_rows(runs), oracle_rows(runs), time_rows(runs)
+    digits = {"PSNR": 2, "SSIM": 4, "LPIPS": 4, "select": 1, "fisher": 1, "reduction": 2}
+    incomplete = [r for r in runs if r.results is None]
+    md = ["# Summary", "",
+          f"{len(runs)} runs ({len(incomplete)} incomplete) from {len({r.setup for r in runs})} setup(s). "
+          "mean ± std: sample standard deviation over seeds and scenes (no ± for a single run).", "",
+          "## Quality on the test views", "", markdown_table(quality, digits),
+          "## Oracle evaluations per acquisition step", "",
+          "Averaged over steps (and seeds), rounded up, as the paper reports. conservative: every sampled candidate "
+          "counts; evaluated: gains actually computed. reduction: conservative count relative to pop_gs.", "",
+          markdown_table(oracles, digits),
+          "## Selection wall time (seconds)", "",
+          "select_s = selection time per acquisition step including the Fisher blocks; fisher_s = the Fisher part.",
+          "", markdown_table(times, digits)]
+    if incomplete:
+        md += ["## Incomplete runs", ""] + [f"- `{r.path}`: {r.problem}" for r in incomplete] + [""]
     atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text("\n".join(md)))
+
+    tables = [("quality", quality), ("oracles", oracles), ("time", times)]
+    columns = ["table"] + list(dict.fromkeys(c for _, rows in tables for row in rows for c in row))
 
     def write_csv(tmp: str) -> None:
         with open(tmp, "w", newline="") as fh:
-            writer = csv.writer(fh)
-            writer.writerow(["table"] + list(quality[0]) if quality else ["table"])
-            for row in quality:
-                writer.writerow(["quality"] + list(row.values()))
-            if oracles:
-                writer.writerow(["table"] + list(oracles[0]))
-                for row in oracles:
-                    writer.writerow(["oracles"] + list(row.values()))
+            writer = csv.DictWriter(fh, fieldnames=columns, restval="")
+            writer.writeheader()
+            for name, rows in tables:
+                for row in rows:
+                    writer.writerow({"table": name, **{c: "" if v is None else v for c, v in row.items()}})
     atomic_write(out / "summary.csv", write_csv)
     return [out / "summary.md", out / "summary.csv"] + plots.write_all(runs, out)
 
@@ -179,9 +256,9 @@ def main() -> None:
     parser.add_argument("roots", nargs="+", help="experiment output roots (searched recursively)")
     parser.add_argument("--out", default=None, help="where to write summary.md/csv and plots (default: first root)")
     args = parser.parse_args()
-    runs = find_runs(args.roots)
-    written = write_outputs(runs, Path(args.out or args.roots[0]))
-    print(Path(written[0]).read_text())
+    logging.basicConfig(level=logging.WARNING, format="warning: %(message)s")
+    written = write_outputs(find_runs(args.roots), Path(args.out or args.roots[0]))
+    print(written[0].read_text())
     print("wrote " + ", ".join(str(p) for p in written))
 
 

@@ -1,5 +1,7 @@
-"""Plots of experiment runs (matplotlib, Agg): PSNR vs views, oracle counts vs K, the eps trade-off, and the
-camera positions each method chose. Each function takes runs from scripts/summarize.py and writes one PNG."""
+"""Plots of experiment runs (matplotlib, Agg backend): test PSNR vs views, oracle evaluations vs K, the eps
+trade-off, and the cameras each method chose. Each function takes the `Run` records of scripts/summarize.py
+(attributes: setup, scene, method, k, eps, seed, setting, stages, final, results, cameras), writes one PNG and
+returns its path, or returns None when the runs hold nothing to plot."""
 from __future__ import annotations
 
 import math
@@ -11,23 +13,33 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 
 
-def _oracles_per_step(run, kind: str = "conservative") -> int:
-    counts = [s["oracle_calls"][kind] for s in run.stages]
-    return math.ceil(sum(counts) / len(counts)) if counts else 0
+def _per_step(runs, kind: str = "conservative") -> int | None:
+    """Oracle evaluations per step over all steps of `runs`, rounded up."""
+    counts = [s["oracle_calls"][kind] for r in runs for s in r.stages if "oracle_calls" in s]
+    return math.ceil(sum(counts) / len(counts)) if counts else None
+
+
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
 
 
 def psnr_vs_views(runs, path: Path) -> Path | None:
-    """Test PSNR against the number of training views, one line per (setup, method setting)."""
+    """Test PSNR against the number of training views, one line per (setup, method setting), mean over runs.
+    Stage points are measured before each acquisition; the last point is after the final stage."""
     curves: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
     for r in runs:
-        points = [(len(s["train_views"]), s["test_psnr"]) for s in r.stages]
-        if r.final:
-            points.append((len(r.final["train_views"]), r.final["test_psnr"]))
+        points = [(len(s.get("train_views", [])), s.get("test_psnr")) for s in r.stages]
+        if isinstance(r.final, dict):
+            points.append((len(r.final.get("train_views", [])), r.final.get("test_psnr")))
         for views, value in points:
-            if value is not None:
-                curves[f"{r.setup}: {r.setting}"][views].append(value)
+            if isinstance(value, (int, float)) and math.isfinite(value):
+                curves[f"{r.setup}: {r.setting}"][views].append(float(value))
     if not curves:
         return None
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
@@ -36,49 +48,46 @@ def psnr_vs_views(runs, path: Path) -> Path | None:
         ax.plot(xs, [mean(pts[x]) for x in xs], marker="o", label=label)
     ax.set_xlabel("training views")
     ax.set_ylabel("test PSNR (dB)")
-    ax.set_title("Test PSNR during acquisition (last point: after refinement)")
+    ax.set_title("Test PSNR during acquisition")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def oracles_vs_k(runs, path: Path) -> Path | None:
-    """Conservative oracle evaluations per step against K for pop_gs and lite_gs (eps = 0.1)."""
-    series: dict[str, dict[int, int]] = defaultdict(dict)
+    """Conservative oracle evaluations per step against K: pop_gs grows with K, lite_gs (one line per eps) not."""
+    groups: dict[str, dict[int, list]] = defaultdict(lambda: defaultdict(list))
     for r in runs:
-        if r.method == "pop_gs" or (r.method == "lite_gs" and abs(r.eps - 0.1) < 1e-9):
-            series[r.method][r.k] = max(series[r.method].get(r.k, 0), _oracles_per_step(r))
-    if not any(len(v) > 1 for v in series.values()):
+        if r.method in ("pop_gs", "lite_gs") and r.stages:
+            groups[r.method if r.method == "pop_gs" else f"lite_gs eps={r.eps:g}"][r.k].append(r)
+    series = {label: {k: _per_step(rs) for k, rs in by_k.items()} for label, by_k in groups.items()}
+    series = {label: pts for label, pts in series.items() if len(pts) > 1}
+    if not series:
         return None
     fig, ax = plt.subplots(figsize=(5, 3.8))
-    for method, pts in sorted(series.items()):
+    for label, pts in sorted(series.items()):
         ks = sorted(pts)
-        ax.plot(ks, [pts[k] for k in ks], marker="o", label=method)
+        ax.plot(ks, [pts[k] for k in ks], marker="o", label=label)
     ax.set_xlabel("views per step K")
     ax.set_ylabel("oracle evaluations per step")
-    ax.set_title("Oracle cost vs K (lite_gs: eps = 0.1)")
+    ax.set_title("Oracle cost vs K")
     ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    ax.legend(fontsize=8)
+    return _save(fig, path)
 
 
 def eps_tradeoff(runs, path: Path) -> Path | None:
-    """lite_gs/ssg: oracle evaluations per step against final test PSNR, labelled by eps."""
-    pts: dict[tuple, list] = defaultdict(list)
+    """lite_gs / ssg: conservative oracle evaluations per step against mean final test PSNR, one point per
+    (method, K, eps), annotated with eps; needs at least two eps values."""
+    groups: dict[tuple, list] = defaultdict(list)
     for r in runs:
-        if r.method in ("lite_gs", "ssg") and r.results:
-            pts[(r.method, r.k, r.eps)].append((_oracles_per_step(r), r.results["PSNR"]))
-    if len({key[2] for key in pts}) < 2:
+        if r.method in ("lite_gs", "ssg") and r.results is not None and r.stages:
+            groups[(r.method, r.k, r.eps)].append(r)
+    if len({key[2] for key in groups}) < 2:
         return None
     fig, ax = plt.subplots(figsize=(5.5, 4))
-    for (method, k, eps), values in sorted(pts.items()):
-        x, y = mean(v[0] for v in values), mean(v[1] for v in values)
+    for (method, k, eps), group in sorted(groups.items()):
+        x, y = _per_step(group), mean(float(r.results["PSNR"]) for r in group)
         ax.scatter([x], [y], marker="o" if method == "lite_gs" else "s", label=f"{method} K={k} eps={eps:g}")
         ax.annotate(f"{eps:g}", (x, y), textcoords="offset points", xytext=(4, 4), fontsize=8)
     ax.set_xlabel("oracle evaluations per step (conservative)")
@@ -86,48 +95,56 @@ def eps_tradeoff(runs, path: Path) -> Path | None:
     ax.set_title("eps trade-off")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
+
+
+def top_down(positions: np.ndarray) -> np.ndarray:
+    """Camera centres [C,3] -> [C,2] coordinates in their principal plane (the two directions of largest spread:
+    the ground plane of a hemisphere or ring of cameras, whatever the dataset's up axis)."""
+    centred = positions - positions.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    return centred @ vt[:2].T
 
 
 def chosen_cameras(runs, path: Path) -> Path | None:
-    """Top-down view of the camera centres: candidates grey, seed views black, picks coloured by stage.
-    One panel per method setting, for the first scene and seed found."""
+    """Top-down camera centres of one scene: candidates grey, seed views black stars, picks coloured by step.
+    One panel per method setting (lowest seed), for the (setup, scene) with cameras.json and the most settings."""
     with_cams = [r for r in runs if r.cameras and r.stages]
     if not with_cams:
         return None
-    scene, setup = with_cams[0].scene, with_cams[0].setup
+    settings: dict[tuple, set] = defaultdict(set)
+    for r in with_cams:
+        settings[(r.setup, r.scene)].add(r.setting)
+    setup, scene = max(sorted(settings), key=lambda key: len(settings[key]))
     chosen = {}
     for r in sorted(with_cams, key=lambda r: r.seed):
-        if r.scene == scene and r.setup == setup:
+        if (r.setup, r.scene) == (setup, scene):
             chosen.setdefault(r.setting, r)
-    fig, axes = plt.subplots(1, len(chosen), figsize=(3.6 * len(chosen), 3.8), squeeze=False)
+    fig, axes = plt.subplots(1, len(chosen), figsize=(3.6 * len(chosen), 3.9), squeeze=False)
     cmap = plt.get_cmap("viridis")
     for ax, (setting, r) in zip(axes[0], sorted(chosen.items())):
-        pos = {c["id"]: c["position"] for c in r.cameras}
-        ax.scatter([p[0] for p in pos.values()], [p[1] for p in pos.values()], c="lightgrey", s=12, label="candidates")
-        seeds = r.stages[0]["train_views"]
-        ax.scatter([pos[v][0] for v in seeds], [pos[v][1] for v in seeds], c="black", marker="*", s=90, label="seed")
+        ids = [c["id"] for c in r.cameras]
+        xy = dict(zip(ids, top_down(np.array([c["position"] for c in r.cameras], dtype=float))))
+
+        def scatter(views, **kw):
+            pts = np.array([xy[v] for v in views if v in xy]).reshape(-1, 2)
+            ax.scatter(pts[:, 0], pts[:, 1], **kw)
+
+        scatter(ids, c="lightgrey", s=12, label="candidates")
+        scatter(r.stages[0].get("train_views", []), c="black", marker="*", s=90, label="seed")
         for i, stage in enumerate(r.stages):
-            color = cmap(i / max(1, len(r.stages) - 1))
-            ax.scatter([pos[v][0] for v in stage["selected"]], [pos[v][1] for v in stage["selected"]],
-                       color=color, s=40, label=f"step {i + 1}")
+            scatter(stage.get("selected", []), color=cmap(i / max(1, len(r.stages) - 1)), s=40, label=f"step {i + 1}")
         ax.set_title(f"{setting}\nseed {r.seed}", fontsize=9)
         ax.set_aspect("equal")
         ax.set_xticks([])
         ax.set_yticks([])
-    axes[0][0].legend(fontsize=7, loc="lower left")
-    fig.suptitle(f"Chosen cameras, {setup} / {scene} (top view)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    axes[0][-1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    fig.suptitle(f"Chosen cameras, {setup} / {scene} (top-down)")
+    return _save(fig, path)
 
 
 def write_all(runs, out: Path) -> list[Path]:
-    """Every plot that the runs support; returns the files written."""
+    """Every plot the runs support, written into `out`; returns the files written."""
     written = [psnr_vs_views(runs, out / "psnr_vs_views.png"), oracles_vs_k(runs, out / "oracles_vs_k.png"),
                eps_tradeoff(runs, out / "eps_tradeoff.png"), chosen_cameras(runs, out / "chosen_cameras.png")]
     return [p for p in written if p is not None]

@@ -1,0 +1,161 @@
+"""scripts/summarize.py on synthetic model directories with known values: every method and column present,
+means/stds against numpy, oracle counts averaged over steps and rounded up, incomplete runs listed, PNGs written."""
+import csv
+import importlib.util
+import json
+import math
+import sys
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from tests.conftest import ROOT, run_cli
+
+spec = importlib.util.spec_from_file_location("summarize", ROOT / "scripts" / "summarize.py")
+summarize = importlib.util.module_from_spec(spec)
+sys.modules["summarize"] = summarize  # dataclasses look their module up there
+spec.loader.exec_module(summarize)
+
+POOL = 12  # synthetic training-camera pool (ids 0..11)
+
+
+def make_run(root: Path, setup: str, scene: str, tag: str, seed: int, method: str, k: int, eps: float,
+             counts: list[tuple[int, int]], metrics: tuple[float, float, float] | None) -> Path:
+    """Write selection.json, cameras.json, run_status.json and (when metrics is given) results.json.
+    counts: (conservative, evaluated) per acquisition step."""
+    model = root / setup / scene / tag / f"seed{seed}"
+    model.mkdir(parents=True)
+    views, stages = [0, 6], []
+    for i, (cons, ev) in enumerate(counts):
+        chosen = [v for v in range(POOL) if v not in views][:k]
+        stages.append({"stage": i, "iteration": 10 * i, "train_views": list(views), "candidates": POOL - len(views),
+                       "selected": chosen, "gains": [1.0] * k, "oracle_calls": {"conservative": cons, "evaluated": ev},
+                       "fisher_seconds": 0.5 * (i + 1), "select_seconds": 1.0 * (i + 1), "test_psnr": 10.0 + i})
+        views += chosen
+    selection = {"config": {"method": method, "eps": eps, "num_init_views": 2, "views_per_step": k,
+                            "max_views": len(views), "iters_per_view": 1, "iterations": 50, "seed": seed},
+                 "stages": stages, "final": {"iteration": 50, "train_views": views, "test_psnr": 20.0 + seed}}
+    (model / "selection.json").write_text(json.dumps(selection))
+    angles = np.linspace(0, 2 * np.pi, POOL, endpoint=False)
+    (model / "cameras.json").write_text(json.dumps([
+        {"id": i, "img_name": f"r_{i}", "width": 8, "height": 8, "position": [4 * math.cos(a), 4 * math.sin(a), 1.0],
+         "rotation": np.eye(3).tolist(), "fx": 8.0, "fy": 8.0} for i, a in enumerate(angles)]))
+    (model / "run_status.json").write_text(json.dumps({"status": "complete" if metrics else "running"}))
+    if metrics:
+        psnr, ssim, lpips = metrics
+        (model / "results.json").write_text(json.dumps({
+            "ours_10": {"PSNR": 0.0, "SSIM": 0.0, "LPIPS": 1.0, "LPIPS_variant": "squeeze"},  # older: must be ignored
+            "ours_50": {"PSNR": psnr, "SSIM": ssim, "LPIPS": lpips, "LPIPS_variant": "squeeze"}}))
+    return model
+
+
+def build(root: Path) -> dict:
+    """Setup 1 (2 scenes x 2 seeds x 3 methods, one lite_gs run unfinished), Setup 4 (K = 3, 4, 6; eps 0.3 / 0.6
+    at K = 6) and an SSG ablation pair; returns the expected values."""
+    rng = np.random.default_rng(0)
+    expect = {"quality": {}, "oracle": {}}
+    s1_counts = {"random": [(0, 0)] * 3, "pop_gs": [(10, 10), (7, 7), (4, 4)], "lite_gs": [(8, 5), (6, 5), (4, 3)]}
+    for method, counts in s1_counts.items():
+        values = []
+        for scene in ("lego", "ship"):
+            for seed in (0, 1):
+                m = (float(rng.uniform(15, 25)), float(rng.uniform(0.5, 0.9)), float(rng.uniform(0.1, 0.3)))
+                unfinished = method == "lite_gs" and scene == "ship" and seed == 1
+                make_run(root, "setup1", scene, method, seed, method, 3, 0.1, counts, None if unfinished else m)
+                if not unfinished:
+                    values.append(m)
+        label = f"{method} K=3" + (" eps=0.1" if method == "lite_gs" else "")
+        expect["quality"][("setup1", label)] = np.array(values)
+    # Setup 4: per-step counts whose step average is not an integer, and differs between seeds.
+    s4 = {("pop_gs", 3, 0.1): [[(12, 12), (9, 9), (6, 6), (4, 4)], [(12, 12), (9, 9), (6, 6), (3, 3)]],
+          ("lite_gs", 3, 0.1): [[(9, 7), (7, 6), (5, 5), (4, 3)], [(9, 8), (7, 7), (5, 4), (3, 3)]],
+          ("pop_gs", 4, 0.1): [[(15, 15), (11, 11), (6, 6)]] * 2,
+          ("lite_gs", 4, 0.1): [[(9, 7), (7, 6), (5, 4)]] * 2,
+          ("pop_gs", 6, 0.1): [[(20, 20), (11, 11)]] * 2,
+          ("lite_gs", 6, 0.1): [[(9, 8), (6, 5)]] * 2,
+          ("lite_gs", 6, 0.3): [[(5, 4), (3, 3)]] * 2,
+          ("lite_gs", 6, 0.6): [[(2, 2), (1, 1)]] * 2}
+    for (method, k, eps), per_seed in s4.items():
+        tag = f"{method}_k{k}" + (f"_eps{eps:g}" if eps != 0.1 else "")
+        for seed, counts in enumerate(per_seed):
+            make_run(root, "setup4", "ship", tag, seed, method, k, eps, counts, (20.0 + eps, 0.8, 0.2))
+        steps = [c for counts in per_seed for c in counts]
+        expect["oracle"][("setup4", k, method, f"{eps:g}" if method == "lite_gs" else "")] = tuple(
+            math.ceil(Fraction(sum(c[i] for c in steps), len(steps))) for i in (0, 1))
+    for eps in (0.1, 0.4):
+        for method in ("lite_gs", "ssg"):
+            make_run(root, "ablation_ssg", "ship", f"{method}_eps{eps:g}", 0, method, 4, eps,
+                     [(8, 6), (6, 5), (4, 4)], (22.0, 0.8, 0.2))
+    return expect
+
+
+def test_tables_match_numpy_and_rounded_up_counts(tmp_path):
+    expect = build(tmp_path / "out")
+    # A run whose selection.json was cut off mid-write, with nothing else readable: listed, not a crash.
+    broken = tmp_path / "out" / "setup1" / "lego" / "pop_gs" / "seed7"
+    broken.mkdir()
+    (broken / "selection.json").write_text('{"config": {"meth')
+    runs = summarize.find_runs([str(tmp_path / "out")])
+    written = summarize.write_outputs(runs, tmp_path / "summary")
+
+    quality = {(r["setup"], r["method"]): r for r in summarize.quality_rows(runs)}
+    for key, values in expect["quality"].items():
+        row = quality[key]
+        assert row["runs"] == len(values)
+        for j, metric in enumerate(("PSNR", "SSIM", "LPIPS")):
+            # 1e-12: the same float64 sums in a different order
+            assert abs(row[f"{metric}_mean"] - values[:, j].mean()) < 1e-12
+            assert abs(row[f"{metric}_std"] - values[:, j].std(ddof=1)) < 1e-12
+        assert row["LPIPS_variant"] == "squeeze"
+    assert quality[("setup1", "lite_gs K=3 eps=0.1")]["incomplete"] == 1
+    assert quality[("setup1", "random K=3")]["incomplete"] == 0
+
+    oracle = {(r["setup"], r["K"], r["method"], r["eps"]): r for r in summarize.oracle_rows(runs)}
+    for key, (cons, ev) in expect["oracle"].items():
+        assert (oracle[key]["conservative"], oracle[key]["evaluated"]) == (cons, ev), key
+    pop6 = expect["oracle"][("setup4", 6, "pop_gs", "")][0]
+    for eps in ("0.1", "0.3", "0.6"):
+        lite = expect["oracle"][("setup4", 6, "lite_gs", eps)][0]
+        assert abs(oracle[("setup4", 6, "lite_gs", eps)]["reduction_%"] - 100 * (1 - lite / pop6)) < 1e-9
+    assert ("ablation_ssg", 4, "ssg", "0.4") in oracle and oracle[("setup1", 3, "pop_gs", "")]["conservative"] == 7
+
+    times = {(r["setup"], r["method"]): r for r in summarize.time_rows(runs)}
+    # three steps with select_seconds 1, 2, 3 and fisher_seconds 0.5, 1, 1.5 in every run
+    assert times[("setup1", "pop_gs K=3")]["select_s_per_run_mean"] == 6.0
+    assert times[("setup1", "pop_gs K=3")]["fisher_s_per_run_mean"] == 3.0
+
+    md = (tmp_path / "summary" / "summary.md").read_text()
+    for label in ["random K=3", "pop_gs K=3", "lite_gs K=3 eps=0.1", "lite_gs K=6 eps=0.6", "ssg K=4 eps=0.4"]:
+        assert f"| {label} |" in md, label
+    for header in ["| PSNR |", "| SSIM |", "| LPIPS |", "| LPIPS_variant |", "| conservative |", "| evaluated |",
+                   "| reduction_% |", "| select_s_per_run |", "| fisher_s_per_run |"]:
+        assert header in md, header
+    assert "## Incomplete runs" in md and "ship/lite_gs/seed1" in md and "seed7`: no readable" in md
+
+    with open(tmp_path / "summary" / "summary.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["table"] for r in rows} == {"quality", "oracles", "time"}
+    q = next(r for r in rows if r["table"] == "quality" and r["method"] == "pop_gs K=3")
+    assert abs(float(q["PSNR_mean"]) - expect["quality"][("setup1", "pop_gs K=3")][:, 0].mean()) < 1e-9
+
+    names = {p.name for p in written}
+    assert names >= {"psnr_vs_views.png", "oracles_vs_k.png", "eps_tradeoff.png", "chosen_cameras.png"}
+    for p in written:
+        if p.suffix == ".png":
+            with Image.open(p) as im:
+                assert im.size[0] > 100 and im.size[1] > 100
+
+
+def test_cli_writes_outputs_and_rejects_missing_root(tmp_path):
+    make_run(tmp_path / "out", "setup1", "lego", "pop_gs", 0, "pop_gs", 3, 0.1, [(10, 10), (7, 7)], (20, 0.8, 0.2))
+    r = run_cli("scripts/summarize.py", str(tmp_path / "out"))
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "out" / "summary.md").is_file() and (tmp_path / "out" / "psnr_vs_views.png").is_file()
+    assert "| pop_gs K=3 |" in r.stdout
+    r = run_cli("scripts/summarize.py", str(tmp_path / "nowhere"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and r.stderr.startswith("error: ")
+    (tmp_path / "empty").mkdir()
+    r = run_cli("scripts/summarize.py", str(tmp_path / "empty"))
+    assert r.returncode == 2 and "no runs" in r.stderr

@@ -1,38 +1,45 @@
-"""Rasterizer and Fisher-pass speed: fast path vs the dense reference, and one view's Fisher blocks vs a training step.
+"""Rasterizer speed: the tiled fast path vs the dense autograd reference, and `attribute_gram` vs a training step.
 
-    python benchmarks/bench_rasterize.py [--preset small|garden] [--repeats 5]
+    python benchmarks/bench_rasterize.py [--presets 2k@128 10k@256 garden] [--repeats 5] [--threads 2]
 
-Presets: `small` = 1,500 random Gaussians at 64x64 (the dense reference fits in memory); `garden` = the real
-Mip-NeRF 360 garden SfM points of ../shared/data/gsplat_garden (subsampled), initialised as a 3DGS trainer would,
-rendered at 1/4 resolution. Prints a table and writes JSON to benchmarks/results/.
+Inputs are already-projected 2D Gaussians (what `rasterize` consumes). Synthetic presets `<N>@<size>` draw N
+anisotropic Gaussians uniformly over a size x size image (sigma log-uniform in [0.5, 5] px at 128 px, scaled
+with the image), opacity uniform in [0.05, 1). `garden` projects the real Mip-NeRF 360 garden SfM points of
+../shared/data/gsplat_garden/test_garden.npz (3DGS initialisation: scale from the 3 nearest neighbours,
+opacity 0.1) into its first camera at 1/4 resolution.
+
+Timed (warm-up, then the median of R runs): fast forward (no grad), fast forward+backward (one training step
+of the rasterizer), the dense reference forward+backward (only where N x H x W <= --ref_max_pairs), and
+`attribute_gram` (one view's Fisher-ready Gram matrices). Prints a table and writes JSON to benchmarks/results/.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import platform
 import statistics
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from active.fisher import fisher_view_blocks  # noqa: E402
-from gaussian_renderer import RasterSettings, project_gaussians, rasterization  # noqa: E402
+from gaussian_renderer.rasterize import attribute_gram, bin_gaussians, rasterize  # noqa: E402
 from gaussian_renderer.reference import rasterize_reference  # noqa: E402
-from scene.cameras import Camera  # noqa: E402
-from scene.gaussian_model import GaussianModel  # noqa: E402
-from utils.knn import mean_sq_dist_to_neighbours  # noqa: E402
+from gaussian_renderer.settings import RasterSettings  # noqa: E402
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
+GARDEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "gsplat_garden" / "test_garden.npz"
+Inputs = tuple  # (means2d [N,2], conics [N,3], opacities [N], colors [N,3], depths [N], radii [N], W, H, bg [3])
 
 
-def median_time(fn, repeats: int) -> float:
-    fn()  # warm-up
+def median_time(fn: Callable[[], object], repeats: int) -> float:
+    """Median wall time of `repeats` calls after one warm-up call, in seconds."""
+    fn()
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -41,96 +48,115 @@ def median_time(fn, repeats: int) -> float:
     return statistics.median(times)
 
 
-def small_scene():
-    g = torch.Generator().manual_seed(0)
-    n = 1500
-    points = (torch.rand(n, 3, generator=g) * 2 - 1) * 0.8
-    model = GaussianModel.from_point_cloud(points, torch.rand(n, 3, generator=g), 0)
-    model.params["logit_opacities"].data += 2.0
-    view = torch.eye(4)
-    view[2, 3] = 3.0
-    return model, Camera(0, "small", view, 70.0, 70.0, 32.0, 32.0, 64, 64)
+def synthetic_inputs(n: int, size: int, seed: int = 0) -> Inputs:
+    """N random anisotropic 2D Gaussians over a size x size image (float32)."""
+    g = torch.Generator().manual_seed(seed)
+    means2d = torch.rand(n, 2, generator=g) * size
+    scale = size / 128
+    sigmas = scale * torch.exp(torch.empty(n, 2).uniform_(math.log(0.5), math.log(5.0), generator=g))  # [N, 2]
+    theta = torch.rand(n, generator=g) * math.pi
+    rot = torch.stack([torch.cos(theta), -torch.sin(theta), torch.sin(theta), torch.cos(theta)], -1).reshape(n, 2, 2)
+    cov = rot @ torch.diag_embed(sigmas ** 2) @ rot.transpose(1, 2)  # [N, 2, 2]
+    inv = torch.linalg.inv(cov)
+    conics = torch.stack([inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 1]], -1)
+    radii = torch.ceil(3 * sigmas.max(dim=1).values).long()
+    opacities = torch.rand(n, generator=g) * 0.95 + 0.05
+    return (means2d, conics, opacities, torch.rand(n, 3, generator=g), torch.rand(n, generator=g) * 10 + 1, radii,
+            size, size, torch.zeros(3))
 
 
-def garden_scene(max_points: int):
-    data = np.load(SHARED / "data" / "gsplat_garden" / "test_garden.npz")
+def garden_inputs(max_points: int) -> Inputs:
+    """The garden SfM points projected into camera 0 at 1/4 resolution (needs gaussian_renderer.projection)."""
+    from gaussian_renderer.projection import project_gaussians
+    from utils.knn import mean_sq_dist_to_neighbours
+
+    data = np.load(GARDEN)
     points = torch.from_numpy(data["means3d"]).float()
     colors = torch.from_numpy(data["colors"]).float() / 255.0
     idx = torch.randperm(points.shape[0], generator=torch.Generator().manual_seed(0))[:max_points]
-    model = GaussianModel.from_point_cloud(points[idx], colors[idx], 0)
-    model.params["logit_opacities"].data += 2.0
-    scale = 4
-    K = torch.from_numpy(data["Ks"][0]).float() / scale
-    w, h = int(data["width"]) // scale, int(data["height"]) // scale
-    view = torch.from_numpy(data["viewmats"][0]).float()
-    return model, Camera(0, "garden", view, float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), w, h)
+    points, colors = points[idx], colors[idx]
+    scales = mean_sq_dist_to_neighbours(points, k=3).clamp_min(1e-7).sqrt()[:, None].repeat(1, 3)
+    quats = torch.tensor([[1.0, 0.0, 0.0, 0.0]]).repeat(points.shape[0], 1)
+    factor = 4
+    k = torch.from_numpy(data["Ks"][0]).float()
+    intrinsics = torch.stack([k[0, 0], k[1, 1], k[0, 2], k[1, 2]]) / factor
+    width, height = int(data["width"]) // factor, int(data["height"]) // factor
+    proj = project_gaussians(points, quats, scales, torch.from_numpy(data["viewmats"][0]).float(), intrinsics,
+                             width, height)
+    return (proj.means2d, proj.conics, torch.full((points.shape[0],), 0.1), colors, proj.depths, proj.radii,
+            width, height, torch.zeros(3))
 
 
-def run(preset: str, repeats: int, max_points: int) -> dict:
-    model, cam = small_scene() if preset == "small" else garden_scene(max_points)
-    settings = RasterSettings()
-    bg = torch.zeros(3)
-    for p in model.params.values():
-        p.requires_grad_(True)
+def bench(name: str, inputs: Inputs, settings: RasterSettings, repeats: int, ref_max_pairs: float) -> dict:
+    """Time the four operations on one input set; returns one JSON row (seconds)."""
+    means2d, conics, opacities, colors, depths, radii, width, height, bg = inputs
+    leaves = [t.clone().requires_grad_(True) for t in (means2d, conics, opacities, colors, bg)]
 
-    def forward():
+    def forward() -> None:
         with torch.no_grad():
-            rasterization(model.means, model.quats, model.scales, model.opacities, model.sh_coeffs, cam.viewmat,
-                          cam.intrinsics, cam.width, cam.height, sh_degree=0, background=bg, settings=settings)
+            rasterize(means2d, conics, opacities, colors, depths, radii, width, height, bg, settings)
 
-    def train_step():
-        out = rasterization(model.means, model.quats, model.scales, model.opacities, model.sh_coeffs, cam.viewmat,
-                            cam.intrinsics, cam.width, cam.height, sh_degree=0, background=bg, settings=settings)
-        out.image.sum().backward()
+    def train_step(fn=rasterize) -> None:
+        image, alpha = fn(*leaves[:4], depths, radii, width, height, leaves[4], settings)
+        (image.sum() + alpha.sum()).backward()
 
-    def reference_step():
-        proj = project_gaussians(model.means, model.quats, model.scales, cam.viewmat, cam.intrinsics, cam.width,
-                                 cam.height)
-        colors = model.sh_coeffs[:, 0] * 0.28209479177387814 + 0.5
-        img, _ = rasterize_reference(proj.means2d, proj.conics, model.opacities, colors, proj.depths, proj.radii,
-                                     cam.width, cam.height, bg, settings)
-        img.sum().backward()
+    def gram() -> None:
+        attribute_gram(means2d, conics, opacities, colors, depths, radii, width, height, bg, settings)
 
-    def fisher():
-        fisher_view_blocks(model, cam, bg, settings)
-
-    with torch.no_grad():
-        radii = project_gaussians(model.means, model.quats, model.scales, cam.viewmat, cam.intrinsics, cam.width,
-                                  cam.height).radii
-    row = {"preset": preset, "gaussians": model.num_gaussians, "visible": int((radii > 0).sum()),
-           "width": cam.width, "height": cam.height,
+    bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
+    row = {"preset": name, "gaussians": means2d.shape[0], "visible": int((radii > 0).sum()), "width": width,
+           "height": height, "tile_size": settings.tile_size, "chunk_size": settings.chunk_size,
+           "pairs_per_tile_max": bins.lists.shape[1], "pairs": int((bins.lists >= 0).sum()),
            "forward_s": median_time(forward, repeats), "train_step_s": median_time(train_step, repeats),
-           "fisher_view_s": median_time(fisher, repeats)}
-    if preset == "small":
-        row["reference_step_s"] = median_time(reference_step, max(1, repeats // 2))
+           "gram_s": median_time(gram, repeats)}
+    if row["visible"] * width * height <= ref_max_pairs:
+        row["reference_step_s"] = median_time(lambda: train_step(rasterize_reference), max(1, repeats // 2))
     return row
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--preset", choices=("small", "garden", "all"), default="all")
+    parser.add_argument("--presets", nargs="+", default=["2k@128", "10k@128", "50k@128", "2k@256", "10k@256",
+                                                         "50k@256", "garden"],
+                        help="<N>@<size> (k = 1000) or 'garden'")
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--garden_points", type=int, default=20_000, help="SfM points used from the garden scene")
+    parser.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's choice)")
+    parser.add_argument("--tile_size", type=int, default=RasterSettings.tile_size)
+    parser.add_argument("--chunk_size", type=int, default=RasterSettings.chunk_size)
+    parser.add_argument("--garden_points", type=int, default=50_000, help="SfM points used from the garden scene")
+    parser.add_argument("--ref_max_pairs", type=float, default=2.5e7,
+                        help="run the dense reference only when visible N x H x W is at most this (memory)")
     args = parser.parse_args()
-    presets = ["small", "garden"] if args.preset == "all" else [args.preset]
-    if "garden" in presets and not (SHARED / "data" / "gsplat_garden" / "test_garden.npz").is_file():
-        print(f"skipping garden: {SHARED}/data/gsplat_garden/test_garden.npz not found")
-        presets.remove("garden")
-    rows = [run(p, args.repeats, args.garden_points) for p in presets]
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, {platform.processor() or platform.machine()}")
-    print(f"{'preset':8} {'N':>7} {'visible':>7} {'HxW':>9} {'fwd ms':>8} {'fwd+bwd ms':>10} {'fisher ms':>9} "
-          f"{'fisher/step':>11} {'ref fwd+bwd ms':>14} {'speed-up':>8}")
-    for r in rows:
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    settings = RasterSettings(tile_size=args.tile_size, chunk_size=args.chunk_size)
+    rows = []
+    for preset in args.presets:
+        if preset == "garden":
+            if not GARDEN.is_file():
+                print(f"skipping garden: {GARDEN} not found")
+                continue
+            inputs = garden_inputs(args.garden_points)
+        else:
+            count, size = preset.split("@")
+            inputs = synthetic_inputs(int(float(count.lower().replace("k", "e3"))), int(size))
+        rows.append(bench(preset, inputs, settings, args.repeats, args.ref_max_pairs))
+        r = rows[-1]
         ref = r.get("reference_step_s")
-        print(f"{r['preset']:8} {r['gaussians']:7d} {r['visible']:7d} {r['height']:4d}x{r['width']:<4d} "
-              f"{1e3 * r['forward_s']:8.1f} {1e3 * r['train_step_s']:10.1f} {1e3 * r['fisher_view_s']:9.1f} "
-              f"{r['fisher_view_s'] / r['train_step_s']:11.2f} "
-              f"{(f'{1e3 * ref:14.1f}' if ref else '           n/a')} "
-              f"{(f'{ref / r['train_step_s']:7.1f}x' if ref else '     n/a')}")
+        ref_cols = f"{1e3 * ref:10.0f} {ref / r['train_step_s']:7.0f}x" if ref else f"{'n/a':>10} {'n/a':>8}"
+        if len(rows) == 1:
+            print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, {platform.machine()}, "
+                  f"tile {settings.tile_size}, chunk {settings.chunk_size}")
+            print(f"{'preset':9} {'visible':>7} {'HxW':>9} {'pairs':>9} {'fwd ms':>8} {'fwd+bwd ms':>10} "
+                  f"{'gram ms':>8} {'gram/step':>9} {'ref f+b ms':>10} {'speed-up':>8}")
+        print(f"{r['preset']:9} {r['visible']:7d} {r['height']:4d}x{r['width']:<4d} {r['pairs']:9d} "
+              f"{1e3 * r['forward_s']:8.1f} {1e3 * r['train_step_s']:10.1f} {1e3 * r['gram_s']:8.1f} "
+              f"{r['gram_s'] / r['train_step_s']:9.2f} {ref_cols}", flush=True)
     out = Path(__file__).parent / "results" / f"rasterize_{time.strftime('%Y%m%d_%H%M%S')}.json"
     out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps({"machine": platform.platform(), "torch": torch.__version__,
-                               "threads": torch.get_num_threads(), "rows": rows}, indent=2))
+    out.write_text(json.dumps({"machine": platform.platform(), "processor": platform.machine(),
+                               "torch": torch.__version__, "threads": torch.get_num_threads(),
+                               "args": vars(args), "rows": rows}, indent=2))
     print(f"wrote {out}")
 
 

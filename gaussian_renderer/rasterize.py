@@ -99,10 +99,10 @@ def bin_gaussians(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.
 
 @dataclass
 class ChunkPairs:
-    """The (pixel, Gaussian) pairs of one depth chunk of the still-active tiles. Shapes [Ta, P, c] unless noted."""
+    """The (pixel, Gaussian) pairs of one depth chunk of the still-active tiles. Shapes [Ta, c, P] unless noted."""
 
     tiles: torch.Tensor  # [Ta] indices of the tiles in this chunk
-    ids: torch.Tensor  # [Ta, c] Gaussian ids (-1 = padding)
+    ids: torch.Tensor  # [Ta, c] Gaussian ids, front to back (-1 = padding)
     alpha: torch.Tensor  # effective alpha (0 where the pair does not contribute)
     unclamped: torch.Tensor  # bool: contributes and alpha < alpha_max (so alpha has a derivative)
     gauss: torch.Tensor  # exp(power)
@@ -117,39 +117,42 @@ def _iterate_chunks(bins: TileBins, means2d: torch.Tensor, conics: torch.Tensor,
     """Replay the front-to-back compositing chunk by chunk (3DGS rules: alpha skip, clamp, early stop).
 
     Only tiles that still have Gaussians at this depth and an unfinished pixel take part in a chunk, so short
-    tile lists and saturated tiles cost nothing.
+    tile lists and saturated tiles cost nothing. Pair tensors are laid out [tiles, depth, pixels] so that sums
+    over a tile's pixels run over contiguous memory.
     """
     num_tiles, num_pixels = bins.pixel_valid.shape
     dtype, device = means2d.dtype, means2d.device
     trans = torch.ones(num_tiles, num_pixels, dtype=dtype, device=device)  # real transmittance
     trans_test = trans.clone()  # transmittance with every alpha, for the early-stop test (monotone)
     for start in range(0, bins.lists.shape[1], settings.chunk_size):
-        active = (bins.lists[:, start] >= 0) & (trans_test >= settings.transmittance_min).any(dim=1)
-        tiles = torch.nonzero(active).squeeze(1)
+        unfinished = (trans_test >= settings.transmittance_min) & bins.pixel_valid  # [T, P]
+        tiles = torch.nonzero((bins.lists[:, start] >= 0) & unfinished.any(dim=1)).squeeze(1)
         if tiles.numel() == 0:
             break
         ids = bins.lists[tiles, start:start + settings.chunk_size]  # [Ta, c]
         safe = ids.clamp_min(0)
         mean, conic, opacity = means2d[safe], conics[safe], opacities[safe]  # [Ta,c,2], [Ta,c,3], [Ta,c]
-        pixels = bins.pixels[tiles]
-        dx = pixels[..., 0:1] - mean[:, None, :, 0]  # [Ta, P, c]
-        dy = pixels[..., 1:2] - mean[:, None, :, 1]
-        power = (-0.5 * (conic[:, None, :, 0] * dx * dx + conic[:, None, :, 2] * dy * dy)
-                 - conic[:, None, :, 1] * dx * dy)
+        pixels = bins.pixels[tiles]  # [Ta, P, 2]
+        dx = pixels[:, None, :, 0] - mean[..., 0:1]  # [Ta, c, P]
+        dy = pixels[:, None, :, 1] - mean[..., 1:2]
+        power = -0.5 * (conic[..., 0:1] * dx * dx + conic[..., 2:3] * dy * dy) - conic[..., 1:2] * dx * dy
         gauss = torch.exp(power)
-        raw = opacity[:, None, :] * gauss
+        raw = opacity[..., None] * gauss
         alpha = raw.clamp_max(settings.alpha_max)
-        live = ((ids >= 0)[:, None, :] & (power <= 0) & (alpha >= settings.alpha_min)
-                & bins.pixel_valid[tiles][:, :, None])
+        live = ((ids >= 0)[..., None] & (power <= 0) & (alpha >= settings.alpha_min)
+                & bins.pixel_valid[tiles][:, None, :])
         alpha = torch.where(live, alpha, torch.zeros_like(alpha))
-        cum_test = trans_test[tiles][:, :, None] * torch.cumprod(1 - alpha, dim=-1)
-        alpha = torch.where(cum_test >= settings.transmittance_min, alpha, torch.zeros_like(alpha))
-        cum = torch.cumprod(1 - alpha, dim=-1)
-        front = trans[tiles][:, :, None] * torch.cat([torch.ones_like(cum[..., :1]), cum[..., :-1]], dim=-1)
+        cum = torch.cumprod(1 - alpha, dim=1)
+        cum_test = trans_test[tiles][:, None, :] * cum
+        stop = cum_test < settings.transmittance_min  # this pair and all behind it in the pixel are skipped
+        if bool(stop.any()):
+            alpha = torch.where(stop, torch.zeros_like(alpha), alpha)
+            cum = torch.cumprod(1 - alpha, dim=1)
+        front = trans[tiles][:, None, :] * torch.cat([torch.ones_like(cum[:, :1]), cum[:, :-1]], dim=1)
         yield ChunkPairs(tiles, ids, alpha, (alpha > 0) & (raw < settings.alpha_max), gauss, dx, dy, front,
                          alpha * front)
-        trans[tiles] = trans[tiles] * cum[..., -1]
-        trans_test[tiles] = cum_test[..., -1]
+        trans[tiles] = trans[tiles] * cum[:, -1]
+        trans_test[tiles] = cum_test[:, -1]
 
 
 def _to_image(values: torch.Tensor, bins: TileBins, width: int, height: int) -> torch.Tensor:
@@ -166,43 +169,45 @@ def _from_image(image: torch.Tensor, bins: TileBins) -> torch.Tensor:
     return torch.where(bins.pixel_valid[..., None], flat[bins.pixel_index], torch.zeros_like(flat[:1]))
 
 
-def _composite(bins, means2d, conics, opacities, colors, background, settings):
+def _composite(bins: TileBins, means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
+               colors: torch.Tensor, background: torch.Tensor,
+               settings: RasterSettings) -> tuple[torch.Tensor, torch.Tensor]:
     """Forward compositing; returns final per-tile colour [T,P,D] (background included) and transmittance [T,P]."""
     num_tiles, num_pixels = bins.pixel_valid.shape
     trans = torch.ones(num_tiles, num_pixels, dtype=means2d.dtype, device=means2d.device)
     color = torch.zeros(num_tiles, num_pixels, colors.shape[1], dtype=means2d.dtype, device=means2d.device)
     for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
-        color[chunk.tiles] += torch.bmm(chunk.weight, colors[chunk.ids.clamp_min(0)])
-        trans[chunk.tiles] = chunk.trans[:, :, -1] * (1 - chunk.alpha[:, :, -1])
+        color[chunk.tiles] += torch.bmm(chunk.weight.transpose(1, 2), colors[chunk.ids.clamp_min(0)])
+        trans[chunk.tiles] = chunk.trans[:, -1] * (1 - chunk.alpha[:, -1])
     return color + trans[..., None] * background, trans
 
 
-def _alpha_partials(chunk: ChunkPairs, conics: torch.Tensor) -> torch.Tensor:
-    """d alpha / d (mean x, mean y, conic a, b, c, opacity) per pair, zero where alpha has no derivative. [Ta,P,c,6]"""
-    conic = conics[chunk.ids.clamp_min(0)][:, None, :, :]  # [Ta, 1, c, 3]
+def _alpha_partials(chunk: ChunkPairs, conics: torch.Tensor, dim: int = -1) -> torch.Tensor:
+    """d alpha / d (mean x, mean y, conic a, b, c, opacity) per pair, zero where alpha has no derivative.
+
+    Returns [Ta, c, P, 6] (dim=-1) or [Ta, c, 6, P] (dim=2, the layout of a per-pair matrix product).
+    """
+    conic = conics[chunk.ids.clamp_min(0)][..., None, :]  # [Ta, c, 1, 3]
     a = torch.where(chunk.unclamped, chunk.alpha, torch.zeros_like(chunk.alpha))
-    dx, dy = chunk.dx, chunk.dy
-    return torch.stack([
-        a * (conic[..., 0] * dx + conic[..., 1] * dy),
-        a * (conic[..., 1] * dx + conic[..., 2] * dy),
-        -0.5 * a * dx * dx,
-        -a * dx * dy,
-        -0.5 * a * dy * dy,
-        torch.where(chunk.unclamped, chunk.gauss, torch.zeros_like(chunk.gauss)),
-    ], dim=-1)
+    ax, ay = a * chunk.dx, a * chunk.dy
+    return torch.stack([conic[..., 0] * ax + conic[..., 1] * ay, conic[..., 1] * ax + conic[..., 2] * ay,
+                        -0.5 * ax * chunk.dx, -ax * chunk.dy, -0.5 * ay * chunk.dy,
+                        torch.where(chunk.unclamped, chunk.gauss, torch.zeros_like(chunk.gauss))], dim=dim)
 
 
 def _color_alpha_partials(chunk: ChunkPairs, colors: torch.Tensor, final_color: torch.Tensor,
                           prefix: torch.Tensor) -> torch.Tensor:
-    """d pixel colour / d alpha_i = c_i T_i - (colour behind i) / (1 - alpha_i). [Ta, P, c, D]
+    """d pixel colour / d alpha_i = c_i T_i - (colour behind i) / (1 - alpha_i). [Ta, c, D, P]
 
-    `prefix` [T, P, D] holds the colour accumulated in front of this chunk and is advanced past it.
+    `final_color` [T, D, P] is the composited colour; `prefix` [T, D, P] holds the colour accumulated in front of
+    this chunk and is advanced past it. Both are laid out channels-before-pixels like the result.
     """
-    col = colors[chunk.ids.clamp_min(0)][:, None, :, :]  # [Ta, 1, c, D]
-    incl = prefix[chunk.tiles][:, :, None, :] + torch.cumsum(chunk.weight[..., None] * col, dim=2)
-    prefix[chunk.tiles] = incl[:, :, -1, :]
-    behind = final_color[chunk.tiles][:, :, None, :] - incl
-    return col * chunk.trans[..., None] - behind / (1 - chunk.alpha)[..., None]
+    col = colors[chunk.ids.clamp_min(0)][..., None]  # [Ta, c, D, 1]
+    incl = torch.cumsum(chunk.weight[:, :, None, :] * col, dim=1)  # [Ta, c, D, P]
+    incl += prefix[chunk.tiles][:, None]
+    prefix[chunk.tiles] = incl[:, -1]
+    behind = final_color[chunk.tiles][:, None] - incl
+    return col * chunk.trans[:, :, None, :] - behind * (1 / (1 - chunk.alpha))[:, :, None, :]
 
 
 def _scatter_rows(values: torch.Tensor, ids: torch.Tensor, n: int) -> torch.Tensor:
@@ -216,6 +221,8 @@ def _scatter_rows(values: torch.Tensor, ids: torch.Tensor, n: int) -> torch.Tens
 
 
 class _RasterizeFunction(torch.autograd.Function):
+    """Forward under no_grad; the backward replays the chunks front to back and chains in closed form."""
+
     @staticmethod
     def forward(ctx, means2d, conics, opacities, colors, background, bins, width, height, settings):
         final_color, trans = _composite(bins, means2d, conics, opacities, colors, background, settings)
@@ -229,33 +236,31 @@ class _RasterizeFunction(torch.autograd.Function):
         bins, settings = ctx.bins, ctx.settings
         n = means2d.shape[0]
         g_color = _from_image(grad_image, bins)  # [T, P, D]
-        # Scalar chain per pixel: dL/dalpha_i = (g.c_i) T_i - (g.F - g.prefix_incl_i) / (1 - alpha_i)
-        # with F the final colour, so no [.., D] tensor per pair is needed.
+        # Scalar chain per pixel: dL/dalpha_i = (g.c_i) T_i - (g.F - g.prefix_incl_i + dL/dT_final T_final)
+        # / (1 - alpha_i) with F the final colour, so no [.., D] tensor per pair is needed.
         g_final = (g_color * final_color).sum(-1)  # [T, P]
+        g_final = g_final - _from_image(grad_alpha[None], bins)[..., 0] * trans_final  # alpha = 1 - T_final
         g_prefix = torch.zeros_like(g_final)
-        g_trans = -_from_image(grad_alpha[None], bins)[..., 0] * trans_final  # dL/dT_final * T_final
         grad_geom = means2d.new_zeros(n, NUM_GEOMETRY_ATTRIBUTES)
         grad_colors = torch.zeros_like(colors)
-        conics_d = conics.detach()
         with torch.no_grad():
             for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
+                safe = chunk.ids.clamp_min(0)
                 g = g_color[chunk.tiles]  # [Ta, P, D]
-                gc = torch.bmm(g, colors[chunk.ids.clamp_min(0)].transpose(1, 2))  # [Ta, P, c]
-                incl = g_prefix[chunk.tiles][:, :, None] + torch.cumsum(chunk.weight * gc, dim=-1)
-                g_prefix[chunk.tiles] = incl[..., -1]
-                one_minus = 1 - chunk.alpha
-                dl_dalpha = gc * chunk.trans - (g_final[chunk.tiles][:, :, None] - incl) / one_minus
-                dl_dalpha = dl_dalpha - g_trans[chunk.tiles][:, :, None] / one_minus
+                gc = torch.bmm(colors[safe], g.transpose(1, 2))  # [Ta, c, P]
+                incl = g_prefix[chunk.tiles][:, None, :] + torch.cumsum(chunk.weight * gc, dim=1)
+                g_prefix[chunk.tiles] = incl[:, -1]
+                dl_dalpha = gc * chunk.trans - (g_final[chunk.tiles][:, None, :] - incl) / (1 - chunk.alpha)
                 la = torch.where(chunk.unclamped, dl_dalpha * chunk.alpha, torch.zeros_like(dl_dalpha))
-                dx, dy = chunk.dx, chunk.dy
-                s_x, s_y = (la * dx).sum(1), (la * dy).sum(1)  # [Ta, c]
-                s_xx, s_xy, s_yy = (la * dx * dx).sum(1), (la * dx * dy).sum(1), (la * dy * dy).sum(1)
-                s_o = torch.where(chunk.unclamped, dl_dalpha * chunk.gauss, torch.zeros_like(dl_dalpha)).sum(1)
-                q = conics_d[chunk.ids.clamp_min(0)]  # [Ta, c, 3]
+                lx, ly = la * chunk.dx, la * chunk.dy
+                s_x, s_y = lx.sum(-1), ly.sum(-1)  # [Ta, c]
+                s_xx, s_xy, s_yy = (lx * chunk.dx).sum(-1), (lx * chunk.dy).sum(-1), (ly * chunk.dy).sum(-1)
+                s_o = torch.where(chunk.unclamped, dl_dalpha * chunk.gauss, torch.zeros_like(dl_dalpha)).sum(-1)
+                q = conics[safe]  # [Ta, c, 3]
                 per_gauss = torch.stack([q[..., 0] * s_x + q[..., 1] * s_y, q[..., 1] * s_x + q[..., 2] * s_y,
                                          -0.5 * s_xx, -s_xy, -0.5 * s_yy, s_o], dim=-1)  # [Ta, c, 6]
                 grad_geom += _scatter_rows(per_gauss, chunk.ids, n)
-                grad_colors += _scatter_rows(torch.bmm(chunk.weight.transpose(1, 2), g), chunk.ids, n)
+                grad_colors += _scatter_rows(torch.bmm(chunk.weight, g), chunk.ids, n)
         grad_bg = (g_color * trans_final[..., None]).sum((0, 1))
         return (grad_geom[:, 0:2], grad_geom[:, 2:5], grad_geom[:, 5], grad_colors, grad_bg,
                 None, None, None, None)
@@ -276,9 +281,11 @@ def rasterize(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tens
               settings: RasterSettings | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Alpha-composite projected Gaussians front to back (differentiable; fast path).
 
+    Gradients flow to means2d, conics, opacities, colors and background (not to depths or radii).
+
     Args:
-        means2d: screen centres in pixels. [N, 2]
-        conics: inverse 2D covariances (a, b, c). [N, 3]
+        means2d: screen centres in pixels (pixel centres at +0.5). [N, 2]
+        conics: inverse 2D covariances (a, b, c) = [[a, b], [b, c]]. [N, 3]
         opacities: activated opacities. [N]
         colors: per-Gaussian colours. [N, D]
         depths: camera-space depth, for sorting. [N]
@@ -301,8 +308,9 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
 
     G_i = sum_pixels sum_channels (dC_pc / da_i)(dC_pc / da_i)^T, a_i = (mean x, y, conic a, b, c, opacity, colour).
     Per pair the Jacobian is [u v^T | w I] with u = dC/dalpha [D], v = dalpha/d(geometry) [6], w = alpha T, so the
-    Gram is [[|u|^2 v v^T, w v u^T], [w u v^T, w^2 I]]; it is summed over a tile's pixels (in the input dtype)
-    before a float64 scatter per Gaussian.
+    Gram is [[|u|^2 v v^T, w v u^T], [w u v^T, w^2 I]]. One forward pass gives the final colours (u needs them),
+    then a replay sums these blocks over each tile's pixels with one small matrix product per (tile, Gaussian), in
+    the input dtype, before a float64 scatter per Gaussian. Memory stays at one chunk's pairs.
 
     Returns:
         float64 Gram matrices. [N, A, A], A = 6 + D
@@ -312,28 +320,24 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
     n, d = colors.shape
     geo = NUM_GEOMETRY_ATTRIBUTES
     bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
-    final_color, _ = _composite(bins, means2d, conics, opacities, colors, background, settings)
+    final_color = _composite(bins, means2d, conics, opacities, colors, background, settings)[0].transpose(1, 2)
+    final_color = final_color.contiguous()  # [T, D, P]
     prefix = torch.zeros_like(final_color)
-    # Per Gaussian: sum of |u|^2 v v^T (6x6), w v u^T (6xD) and w^2, accumulated in float64 across tiles.
-    sums = torch.zeros(n, geo * geo + geo * d + 1, dtype=torch.float64, device=means2d.device)
+    # Per Gaussian: [v (|u|^2 v)^T | v (w u)^T] (6 x (6 + D)) and sum w^2, accumulated in float64 across tiles.
+    sums = torch.zeros(n, geo * (geo + d) + 1, dtype=torch.float64, device=means2d.device)
     for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
-        u = _color_alpha_partials(chunk, colors, final_color, prefix)  # [Ta, P, c, D]
-        v = _alpha_partials(chunk, conics)  # [Ta, P, c, 6]
-        w = chunk.weight  # [Ta, P, c]
-        t, p, c = w.shape
-        v_t = v.permute(0, 2, 1, 3).reshape(t * c, p, geo)  # [Ta*c, P, 6]
-        uu = (u * u).sum(-1).permute(0, 2, 1).reshape(t * c, p, 1)
-        vv = torch.bmm((uu * v_t).transpose(1, 2), v_t)  # [Ta*c, 6, 6], summed over the tile's pixels
-        wu = (w[..., None] * u).permute(0, 2, 1, 3).reshape(t * c, p, d)
-        vu = torch.bmm(v_t.transpose(1, 2), wu)  # [Ta*c, 6, D]
-        ww = (w * w).sum(1).reshape(t * c, 1)
-        rows = torch.cat([vv.reshape(t * c, -1), vu.reshape(t * c, -1), ww], dim=1).double()
+        u = _color_alpha_partials(chunk, colors, final_color, prefix)  # [Ta, c, D, P]
+        v = _alpha_partials(chunk, conics, dim=2)  # [Ta, c, 6, P]
+        t, c, _, p = v.shape
+        right = torch.cat([(u * u).sum(2, keepdim=True) * v, chunk.weight[:, :, None, :] * u], dim=2)
+        prod = torch.bmm(v.reshape(t * c, geo, p), right.reshape(t * c, geo + d, p).transpose(1, 2))
+        ww = (chunk.weight * chunk.weight).sum(-1).reshape(t * c, 1)
+        rows = torch.cat([prod.reshape(t * c, -1), ww], dim=1).double()
         sums += _scatter_rows(rows.reshape(t, c, -1), chunk.ids, n)
+    prod = sums[:, :-1].reshape(n, geo, geo + d)
     gram = torch.zeros(n, geo + d, geo + d, dtype=torch.float64, device=means2d.device)
-    gram[:, :geo, :geo] = sums[:, :geo * geo].reshape(n, geo, geo)
-    vu_all = sums[:, geo * geo:geo * geo + geo * d].reshape(n, geo, d)
-    gram[:, :geo, geo:] = vu_all
-    gram[:, geo:, :geo] = vu_all.transpose(1, 2)
+    gram[:, :geo, :] = prod
+    gram[:, geo:, :geo] = prod[:, :, geo:].transpose(1, 2)
     gram[:, geo:, geo:] = sums[:, -1, None, None] * torch.eye(d, dtype=torch.float64, device=means2d.device)
     return gram
 
@@ -352,22 +356,27 @@ def pixel_attribute_partials(means2d: torch.Tensor, conics: torch.Tensor, opacit
                              colors: torch.Tensor, depths: torch.Tensor, radii: torch.Tensor, width: int,
                              height: int, background: torch.Tensor,
                              settings: RasterSettings | None = None) -> PairPartials:
-    """Closed-form d colour / d 2D attributes for every contributing pair (no autograd). Small images only."""
+    """Closed-form d colour / d 2D attributes for every contributing pair (no autograd). Small images only.
+
+    A pair contributes when its alpha survives the cut-offs (alpha_min, power <= 0, early stop); clamped pairs
+    keep their colour and background terms but have zero alpha derivative.
+    """
     settings = settings or RasterSettings()
     _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
     d = colors.shape[1]
     bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
-    final_color, _ = _composite(bins, means2d, conics, opacities, colors, background, settings)
+    final_color = _composite(bins, means2d, conics, opacities, colors, background, settings)[0].transpose(1, 2)
+    final_color = final_color.contiguous()  # [T, D, P]
     prefix = torch.zeros_like(final_color)
     pix, gid, jacs = [], [], []
     eye = torch.eye(d, dtype=means2d.dtype, device=means2d.device)
     for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
-        u = _color_alpha_partials(chunk, colors, final_color, prefix)  # [Ta, P, c, D]
-        v = _alpha_partials(chunk, conics)  # [T, P, c, 6]
+        u = _color_alpha_partials(chunk, colors, final_color, prefix).transpose(2, 3)  # [Ta, c, P, D]
+        v = _alpha_partials(chunk, conics)  # [Ta, c, P, 6]
         jac = torch.cat([u[..., :, None] * v[..., None, :],
-                         chunk.weight[..., None, None] * eye], dim=-1)  # [T, P, c, D, A]
+                         chunk.weight[..., None, None] * eye], dim=-1)  # [Ta, c, P, D, A]
         mask = chunk.alpha > 0
-        t_idx, p_idx, c_idx = torch.nonzero(mask, as_tuple=True)
+        t_idx, c_idx, p_idx = torch.nonzero(mask, as_tuple=True)
         pix.append(bins.pixel_index[chunk.tiles[t_idx], p_idx])
         gid.append(chunk.ids[t_idx, c_idx])
         jacs.append(jac[mask])

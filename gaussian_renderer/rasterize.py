@@ -303,23 +303,27 @@ def rasterize(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tens
 @torch.no_grad()
 def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, colors: torch.Tensor,
                    depths: torch.Tensor, radii: torch.Tensor, width: int, height: int, background: torch.Tensor,
-                   settings: RasterSettings | None = None) -> torch.Tensor:
+                   settings: RasterSettings | None = None, weights: torch.Tensor | None = None) -> torch.Tensor:
     """Per-Gaussian Gram matrix of the pixel-colour partials w.r.t. the 2D attributes.
 
-    G_i = sum_pixels sum_channels (dC_pc / da_i)(dC_pc / da_i)^T, a_i = (mean x, y, conic a, b, c, opacity, colour).
+    G_i = sum_pixels weight_p sum_channels (dC_pc / da_i)(dC_pc / da_i)^T, a_i = (mean x, y, conic a, b, c, opacity, colour).
     Per pair the Jacobian is [u v^T | w I] with u = dC/dalpha [D], v = dalpha/d(geometry) [6], w = alpha T, so the
     Gram is [[|u|^2 v v^T, w v u^T], [w u v^T, w^2 I]]. One forward pass gives the final colours (u needs them),
     then a replay sums these blocks over each tile's pixels with one small matrix product per (tile, Gaussian), in
     the input dtype, before a float64 scatter per Gaussian. Memory stays at one chunk's pairs.
 
+    Args:
+        weights: optional per-pixel weights (e.g. inverse noise variances or a mask), 1 when None. [H, W]
     Returns:
         float64 Gram matrices. [N, A, A], A = 6 + D
     """
     settings = settings or RasterSettings()
     _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
+    assert weights is None or weights.shape == (height, width), f"weights must be [H,W], got {tuple(weights.shape)}"
     n, d = colors.shape
     geo = NUM_GEOMETRY_ATTRIBUTES
     bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
+    pixel_weights = None if weights is None else _from_image(weights[None].to(means2d.dtype), bins)[..., 0]  # [T, P]
     final_color = _composite(bins, means2d, conics, opacities, colors, background, settings)[0].transpose(1, 2)
     final_color = final_color.contiguous()  # [T, D, P]
     prefix = torch.zeros_like(final_color)
@@ -329,14 +333,21 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
         u = _color_alpha_partials(chunk, colors, final_color, prefix)  # [Ta, c, D, P]
         v = _alpha_partials(chunk, conics, dim=2)  # [Ta, c, 6, P]
         t, c, _, p = v.shape
-        right = torch.cat([(u * u).sum(2, keepdim=True) * v, chunk.weight[:, :, None, :] * u], dim=2)
+        uu, w = (u * u).sum(2, keepdim=True), chunk.weight[:, :, None, :]  # [Ta, c, 1, P] each
+        ww = w * w
+        if pixel_weights is not None:
+            wp = pixel_weights[chunk.tiles][:, None, None, :]  # [Ta, 1, 1, P]
+            uu, ww = uu * wp, ww * wp
+            w = w * wp
+        right = torch.cat([uu * v, w * u], dim=2)  # [Ta, c, 6 + D, P]
         prod = torch.bmm(v.reshape(t * c, geo, p), right.reshape(t * c, geo + d, p).transpose(1, 2))
-        ww = (chunk.weight * chunk.weight).sum(-1).reshape(t * c, 1)
+        ww = ww.sum((2, 3)).reshape(t * c, 1)
         rows = torch.cat([prod.reshape(t * c, -1), ww], dim=1).double()
         sums += _scatter_rows(rows.reshape(t, c, -1), chunk.ids, n)
     prod = sums[:, :-1].reshape(n, geo, geo + d)
     gram = torch.zeros(n, geo + d, geo + d, dtype=torch.float64, device=means2d.device)
     gram[:, :geo, :] = prod
+    gram[:, :geo, :geo] = 0.5 * (prod[:, :, :geo] + prod[:, :, :geo].transpose(1, 2))  # exactly symmetric
     gram[:, geo:, :geo] = prod[:, :, geo:].transpose(1, 2)
     gram[:, geo:, geo:] = sums[:, -1, None, None] * torch.eye(d, dtype=torch.float64, device=means2d.device)
     return gram

@@ -9,13 +9,17 @@ from gaussian_renderer.settings import RasterSettings
 
 def rasterize_reference(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, colors: torch.Tensor,
                         depths: torch.Tensor, radii: torch.Tensor, width: int, height: int,
-                        background: torch.Tensor, settings: RasterSettings | None = None
-                        ) -> tuple[torch.Tensor, torch.Tensor]:
+                        background: torch.Tensor, settings: RasterSettings | None = None,
+                        tile_cutoff: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
     """Dense front-to-back compositing with plain autograd; same rules and cut-offs as `rasterize`.
 
-    A Gaussian touches a pixel only if the pixel's tile lies in the Gaussian's tile rectangle (`tile_ranges`: its
-    reach rounded out to tiles), exactly the binning rule of the fast path. Loops over Gaussians in depth order.
-    Returns image [D, H, W] and alpha [H, W].
+    Loops over the non-culled Gaussians (radius > 0) in depth order, each against every pixel:
+    alpha = min(alpha_max, o exp(power)), power = -1/2 d^T Q d, d = pixel centre - mean; the pair is skipped when
+    alpha < alpha_min or power > 0, and a pixel stops (this Gaussian and all behind it skipped) once its
+    transmittance would fall below transmittance_min. With `tile_cutoff` a Gaussian touches a pixel only if the
+    pixel's tile lies in the Gaussian's tile rectangle (`tile_ranges`: its opacity-aware reach, capped by the
+    3-sigma radius, rounded out to tiles), exactly the binning rule of the fast path; without it, every pixel.
+    Returns image [D, H, W] and alpha [H, W] (1 - final transmittance).
     """
     s = settings or RasterSettings()
     ys, xs = torch.meshgrid(torch.arange(height, device=means2d.device), torch.arange(width, device=means2d.device),
@@ -34,7 +38,7 @@ def rasterize_reference(means2d: torch.Tensor, conics: torch.Tensor, opacities: 
         dx, dy = px - means2d[i, 0], py - means2d[i, 1]
         power = -0.5 * (conics[i, 0] * dx * dx + conics[i, 2] * dy * dy) - conics[i, 1] * dx * dy
         alpha = torch.clamp_max(opacities[i] * torch.exp(power), s.alpha_max)
-        use = in_rect & (power <= 0) & (alpha >= s.alpha_min) & ~done
+        use = (in_rect | (not tile_cutoff)) & (power <= 0) & (alpha >= s.alpha_min) & ~done
         stop = use & (trans * (1 - alpha) < s.transmittance_min)
         done = done | stop
         use = use & ~stop

@@ -124,7 +124,7 @@ def main() -> None:
     parser.add_argument("--tile_size", type=int, default=RasterSettings.tile_size)
     parser.add_argument("--chunk_size", type=int, default=RasterSettings.chunk_size)
     parser.add_argument("--garden_points", type=int, default=50_000, help="SfM points used from the garden scene")
-    parser.add_argument("--ref_max_pairs", type=float, default=2.5e7,
+    parser.add_argument("--ref_max_pairs", type=float, default=4e7,
                         help="run the dense reference only when visible N x H x W is at most this (memory)")
     args = parser.parse_args()
     if args.threads:

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from utils.errors import UserError
+
 
 @dataclass(frozen=True)
 class RasterSettings:
@@ -13,3 +15,14 @@ class RasterSettings:
     alpha_min: float = 1.0 / 255.0  # contributions with a smaller alpha are skipped
     alpha_max: float = 0.99  # alpha is clamped here (keeps 1 - alpha away from 0)
     transmittance_min: float = 1e-4  # a pixel stops once its transmittance would fall below this
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.tile_size, int) and self.tile_size >= 1):
+            raise UserError(f"tile_size must be a positive integer, got {self.tile_size!r}; use e.g. --tile_size 4")
+        if not (isinstance(self.chunk_size, int) and self.chunk_size >= 1):
+            raise UserError(f"chunk_size must be a positive integer, got {self.chunk_size!r}; use e.g. 32")
+        if not 0 < self.alpha_min < self.alpha_max < 1:
+            raise UserError(f"need 0 < alpha_min < alpha_max < 1, got {self.alpha_min} and {self.alpha_max}; "
+                            "use the defaults 1/255 and 0.99")
+        if not 0 <= self.transmittance_min < 1:
+            raise UserError(f"transmittance_min must be in [0, 1), got {self.transmittance_min}; use 1e-4")

@@ -4,6 +4,7 @@ import torch
 
 from gaussian_renderer import RasterSettings, rasterize
 from gaussian_renderer.reference import rasterize_reference
+from utils.errors import UserError
 
 BG = torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64)
 
@@ -168,3 +169,10 @@ def test_gradcheck_fast_path():
         return rasterize(m, c, o, col, depths, radii, 6, 5, bg, settings)
     # Central differences with eps 1e-6 in float64: truncation error ~1e-12, well inside atol.
     assert torch.autograd.gradcheck(f, inputs, eps=1e-6, atol=1e-5)
+
+
+@pytest.mark.parametrize("bad", [dict(tile_size=0), dict(tile_size=2.5), dict(chunk_size=0),
+                                 dict(alpha_max=1.0), dict(alpha_min=0.0), dict(transmittance_min=1.0)])
+def test_bad_settings_raise_user_error(bad):
+    with pytest.raises(UserError, match="must|need"):
+        RasterSettings(**bad)

@@ -1,8 +1,8 @@
 """Tile-binned, depth-chunked alpha compositing of 2D Gaussians, with a recomputing backward pass.
 
-The shipped fast path. Gaussians are binned into square tiles by their 3-sigma box, sorted by depth per tile, and
-every tile is processed at once, `chunk_size` Gaussians deep at a time: the working set is
-[tiles, tile_size^2, chunk_size], never pixels x all Gaussians. Nothing per pair is stored for the backward pass:
+The shipped fast path. Gaussians are binned into square tiles by their reach (`tile_ranges`: opacity-aware, capped
+by the 3-sigma radius), sorted by depth per tile, and every still-active tile is processed at once, `chunk_size`
+Gaussians deep at a time: the working set is [tiles, chunk_size, tile_size^2], never pixels x all Gaussians. Nothing per pair is stored for the backward pass:
 it replays the chunks front to back and gets every pair's d colour / d alpha in closed form from the running
 prefix colour and the saved final colour (the CUDA 3DGS kernel does the same back to front).
 

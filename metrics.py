@@ -43,6 +43,16 @@ def _read(path: Path) -> torch.Tensor:
         return torch.from_numpy(np.asarray(im.convert("RGB"), dtype=np.float32) / 255.0).permute(2, 0, 1)
 
 
+LPIPS_MIN_SIZE = 32  # the LPIPS backbones downsample 4-5 times; smaller images have no valid deepest features
+
+
+def lpips_distance(model, render: torch.Tensor, gt: torch.Tensor) -> float | None:
+    """LPIPS of [3, H, W] images in [0, 1]; None without a model or for images too small for the network."""
+    if model is None or min(render.shape[-2:]) < LPIPS_MIN_SIZE:
+        return None
+    return float(model(render[None] * 2 - 1, gt[None] * 2 - 1).item())
+
+
 @torch.no_grad()
 def evaluate_method(method_dir: Path, lpips_model, quiet: bool = False) -> dict[str, dict[str, float | None]]:
     """Per-view metrics of one `test/ours_N` directory: {"PSNR": {name: v}, "SSIM": ..., "LPIPS": ...}."""
@@ -58,8 +68,7 @@ def evaluate_method(method_dir: Path, lpips_model, quiet: bool = False) -> dict[
                             f"{tuple(gt.shape)}; rerun render.py")
         per_view["PSNR"][name] = float(psnr(render, gt))
         per_view["SSIM"][name] = float(ssim(render, gt))
-        per_view["LPIPS"][name] = (float(lpips_model(render[None] * 2 - 1, gt[None] * 2 - 1).item())
-                                   if lpips_model is not None else None)
+        per_view["LPIPS"][name] = lpips_distance(lpips_model, render, gt)
     return per_view
 
 

@@ -51,7 +51,8 @@ def load_ply(path: str | os.PathLike) -> tuple[dict[str, torch.Tensor], int]:
         raise UserError(f"cannot read PLY {path} ({type(exc).__name__}: {exc}); the file is corrupt or truncated, "
                         "retrain or restore it") from None
     n = len(vertex.data)
-    rest = cols([f"f_rest_{i}" for i in range(num_rest)]).reshape(n, 3, -1).transpose(1, 2)
+    rest = (cols([f"f_rest_{i}" for i in range(num_rest)]).reshape(n, 3, -1).transpose(1, 2) if num_rest
+            else torch.zeros(n, 0, 3))
     params = {
         "means": cols(["x", "y", "z"]),
         "sh_dc": cols(["f_dc_0", "f_dc_1", "f_dc_2"])[:, None, :],

@@ -91,7 +91,9 @@ def load_run(model: Path) -> Run:
     run.cameras = cameras if isinstance(cameras, list) else []
     results = _read_json(model / "results.json") if (model / "results.json").is_file() else None
     entries = {k: v for k, v in (results or {}).items() if re.fullmatch(r"ours_\d+", k) and isinstance(v, dict)}
-    if entries:
+    if (model / "selection.json").is_file() and not isinstance(sel, dict):
+        run.problem = "no readable selection.json (truncated or not valid JSON)"
+    elif entries:
         run.results = entries[max(entries, key=lambda k: int(k.split("_")[1]))]
     elif not cfg:
         run.problem = "no readable selection.json or cfg_args"
@@ -256,10 +258,15 @@ def main() -> None:
     parser.add_argument("roots", nargs="+", help="experiment output roots (searched recursively)")
     parser.add_argument("--out", default=None, help="where to write summary.md/csv and plots (default: first root)")
     args = parser.parse_args()
-    logging.basicConfig(level=logging.WARNING, format="warning: %(message)s")
-    written = write_outputs(find_runs(args.roots), Path(args.out or args.roots[0]))
+    logging.basicConfig(level=logging.ERROR, format="warning: %(message)s")
+    runs = find_runs(args.roots)
+    written = write_outputs(runs, Path(args.out or args.roots[0]))
     print(written[0].read_text())
     print("wrote " + ", ".join(str(p) for p in written))
+    broken = [r for r in runs if r.problem and "truncated" in r.problem]
+    if broken:
+        raise UserError(f"{broken[0].path / 'selection.json'} is truncated or not valid JSON ({len(broken)} run(s) "
+                        "affected, listed as incomplete in the summary); rerun those runs or delete their directories")
 
 
 if __name__ == "__main__":

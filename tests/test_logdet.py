@@ -1,50 +1,152 @@
-"""Block log-det gains against dense torch.logdet; robustness on nearly singular blocks."""
+"""Block log-det information: gains against dense torch.logdet, whitened == direct form, the ridge, robustness on
+nearly singular blocks, errors, oracle counting."""
 import math
 
+import pytest
 import torch
 
-from active.logdet import BlockInformation, logdet_identity_plus
+from active.logdet import BlockGainOracle, BlockInformation, logdet_identity_plus
+from utils.errors import UserError
+
+
+@pytest.fixture(autouse=True, scope="module")
+def single_thread():
+    """Tiny batched linear algebra: one thread avoids ~ms of thread-pool hand-off per call on a busy machine."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
 
 
 def random_blocks(count, n, p, seed=0, rank=None):
-    """`count` random PSD block sets [n, p, p] (rank-deficient when `rank` < p)."""
+    """`count` random PSD block sets J^T J, [count, n, p, p] float64 (rank-deficient when `rank` < p)."""
     g = torch.Generator().manual_seed(seed)
-    r = rank or p
-    j = torch.randn(count, n, r, p, generator=g, dtype=torch.float64)
+    j = torch.randn(count, n, rank or p, p, generator=g, dtype=torch.float64)
     return j.transpose(-1, -2) @ j
 
 
-def block_diag(blocks):
+def dense(blocks):
+    """The block-diagonal matrix of [N, P, P] blocks. [N*P, N*P]"""
     return torch.block_diag(*blocks)
 
 
-def test_gain_equals_dense_logdet_after_commits():
-    prior, *views = random_blocks(5, 4, 3, seed=1)
+def clamped_gain_reference(a_blocks, h_blocks):
+    """sum_i sum log1p(max(eig(A_i^-1/2 H_i A_i^-1/2), 0)) via a symmetric eigen square root: the clamped
+    definition, computed without Cholesky."""
+    evals, evecs = torch.linalg.eigh(a_blocks)
+    inv_sqrt = evecs @ torch.diag_embed(evals.rsqrt()) @ evecs.transpose(-1, -2)
+    w = inv_sqrt @ (0.5 * (h_blocks + h_blocks.transpose(-1, -2))) @ inv_sqrt
+    return float(torch.log1p(torch.linalg.eigvalsh(w).clamp_min(0)).sum())
+
+
+def test_gains_equal_dense_logdet_through_commits():
+    prior, *views = random_blocks(6, 4, 3, seed=1)
     info = BlockInformation(prior, delta_rel=1e-3, delta_abs=1e-6)
-    dense = block_diag(info.matrix)
-    for v in views[:2]:
-        expected = float(torch.logdet(dense + block_diag(v)) - torch.logdet(dense))
-        assert math.isclose(info.gain(v), expected, rel_tol=1e-10)
+    a = dense(info.matrix)  # [12, 12]
+    h0_logdet = float(torch.logdet(a))
+    accepted = []
+    for v in views[:4]:
+        expected = float(torch.logdet(a + dense(v)) - torch.logdet(a))
+        gain = info.gain(v)
+        assert math.isclose(gain, expected, rel_tol=1e-10)  # float64, 12x12 well conditioned: ~1e-14 achieved
         info.add(v)
-        dense = dense + block_diag(v)
-    assert math.isclose(info.logdet(), float(torch.logdet(dense)), rel_tol=1e-10)
-    # rho(S) = logdet(A_S) - logdet(H_0) equals the sum of the accepted marginal gains.
-    total = sum(BlockInformation(prior, 1e-3, 1e-6).gain(v) for v in views[:1])
-    assert total > 0
+        a = a + dense(v)
+        accepted.append(gain)
+        assert torch.allclose(dense(info.matrix), a, rtol=1e-12, atol=1e-12)  # L C (L C)^T == A + H, float64
+        assert math.isclose(info.logdet(), float(torch.logdet(a)), rel_tol=1e-10)
+    # rho(S) = logdet(A_S) - logdet(H_0) telescopes into the sum of the accepted marginal gains.
+    assert math.isclose(info.rho(), float(torch.logdet(a)) - h0_logdet, rel_tol=1e-10)
+    assert math.isclose(info.rho(), sum(accepted), rel_tol=1e-10)
 
 
-def test_nearly_singular_blocks_never_nan():
-    # Rank-1 blocks (null directions), a view with tiny negative eigenvalues, and an all-zero prior.
-    prior = random_blocks(1, 6, 4, seed=2, rank=1)[0]
-    view = random_blocks(1, 6, 4, seed=3, rank=2)[0]
-    view = view - 1e-12 * torch.eye(4, dtype=torch.float64)  # float32-accumulation-like negative eigenvalues
-    for p in (prior, torch.zeros_like(prior)):
+def test_whitened_equals_direct_form_on_ill_conditioned_blocks():
+    # Prior eigenvalues spread over 1e-4..1e4 (ratio 1e8) per block, views of similar spread.
+    g = torch.Generator().manual_seed(5)
+    q, _ = torch.linalg.qr(torch.randn(8, 5, 5, generator=g, dtype=torch.float64))
+    spread = torch.logspace(-4, 4, 5, dtype=torch.float64)
+    prior = q @ torch.diag_embed(spread) @ q.transpose(-1, -2)
+    view = random_blocks(1, 8, 5, seed=6)[0] * 1e2
+    info = BlockInformation(prior, delta_rel=0.0, delta_abs=1e-12)
+    a = info.matrix
+    direct = float((torch.logdet(a + view) - torch.logdet(a)).sum())
+    # Direct form loses ~cond * eps = 1e8 * 1e-16 relative accuracy; 1e-7 leaves room for that.
+    assert math.isclose(info.gain(view), direct, rel_tol=1e-7)
+    assert math.isclose(info.gain(view), clamped_gain_reference(a, view), rel_tol=1e-7)
+
+
+def test_ridge_is_relative_plus_absolute():
+    prior = torch.diag_embed(torch.tensor([[4.0, 1.0, 0.0], [0.0, 0.0, 0.0]], dtype=torch.float64))  # [2, 3, 3]
+    info = BlockInformation(prior, delta_rel=0.5, delta_abs=0.25)
+    expected = torch.diag_embed(torch.tensor([[6.25, 3.25, 2.25], [0.25, 0.25, 0.25]], dtype=torch.float64))
+    assert torch.equal(info.matrix, expected)  # exact: dyadic numbers
+
+
+def test_identity_plus_clamps_negative_eigenvalues():
+    # Block 0: PSD (Cholesky path); block 1: tiny negative eigenvalues (negative log-det -> eigen path);
+    # block 2: an eigenvalue below -1 (Cholesky fails -> eigen path); block 3: all zero.
+    psd = random_blocks(1, 1, 4, seed=4, rank=2)[0, 0]
+    eye = torch.eye(4, dtype=torch.float64)
+    w = torch.stack([psd, 1e-3 * psd - 1e-13 * eye, psd - 3.0 * eye, torch.zeros(4, 4, dtype=torch.float64)])
+    terms = logdet_identity_plus(w)
+    expected = torch.log1p(torch.linalg.eigvalsh(w).clamp_min(0)).sum(-1)
+    assert torch.allclose(terms, expected, rtol=1e-10, atol=1e-15)  # float64; atol for the exact-zero block
+    assert bool((terms >= 0).all()) and terms[3] == 0
+
+
+def test_nearly_singular_blocks_give_finite_nonnegative_gains():
+    # Rank-deficient float32-accumulated blocks (J^T J with J of rank 2 in float32), as the Fisher oracle makes:
+    # exact null directions plus negative eigenvalues ~ eps32 * |H|.
+    g = torch.Generator().manual_seed(2)
+    jac = torch.randn(3, 10, 2, 6, generator=g) * torch.logspace(-3, 3, 6)  # [views, N, rank 2, P 6], scales 1e6
+    blocks32 = (jac.transpose(-1, -2) @ jac).double()  # [3, 10, 6, 6] float32 products
+    assert float(torch.linalg.eigvalsh(blocks32).min()) < 0  # the problem the clamp exists for
+    prior = blocks32[0]
+    zero = torch.zeros_like(prior)
+    for p in (prior, zero):
         info = BlockInformation(p)
-        g = info.gain(view)
-        assert math.isfinite(g) and g >= 0
+        for view in (blocks32[1], -blocks32[2] * 1e-9, zero):  # a PSD-ish view, a tiny negative view, no view
+            gain = info.gain(view)
+            assert math.isfinite(gain) and gain >= 0
+            assert math.isclose(gain, clamped_gain_reference(info.matrix, view), rel_tol=1e-6, abs_tol=1e-9)
+            # ^ eigen-sqrt twin on matrices of condition up to 1/delta_rel = 1e6: ~1e-10 relative; abs for gain 0
+        assert info.gain(zero) == 0.0
+        gain = info.gain(blocks32[1])
+        # Eigenvalues of W are known to ~eps64 * |W| absolutely (|W| ~ 1e14 over the zero prior): a log1p of the
+        # small ones moves by up to that much, over N * P = 60 of them.
+        noise = 60 * 2.2e-16 * float(torch.linalg.matrix_norm(info.whiten(blocks32[1]), ord=2).max())
+        info.add(blocks32[1])  # committing a non-PSD view never fails, and adds exactly the measured gain
+        assert abs(info.rho() - gain) <= 1e-9 * gain + noise
 
 
-def test_identity_plus_fallback_matches_eigen():
-    w = random_blocks(1, 3, 4, seed=4, rank=2)[0] - 1e-13 * torch.eye(4, dtype=torch.float64)
-    expected = torch.log1p(torch.linalg.eigvalsh(w).clamp_min(0)).sum()
-    assert abs(float(logdet_identity_plus(w)) - float(expected)) < 1e-8
+def test_errors_name_gaussian_count_and_ridge():
+    prior = random_blocks(1, 6, 3, seed=3, rank=1)[0]
+    with pytest.raises(UserError, match=r"of 6 Gaussians .*delta_rel=0.*delta_abs=1e-30"):
+        BlockInformation(prior - 1e-3 * torch.eye(3, dtype=torch.float64), delta_rel=0.0, delta_abs=1e-30)
+    with pytest.raises(UserError, match="delta_rel"):
+        BlockInformation(prior, delta_rel=0.0, delta_abs=0.0)
+    info = BlockInformation(prior)
+    bad = prior.clone()
+    bad[2, 0, 0] = float("nan")
+    with pytest.raises(UserError, match="6 Gaussians contain NaN"):
+        info.gain(bad)
+    with pytest.raises(UserError, match="NaN"):
+        info.add(bad)
+
+
+def test_oracle_counts_gains_not_commits_and_streams_blocks():
+    prior, *views = random_blocks(4, 3, 2, seed=8)
+    calls = []
+
+    def view_blocks(v):  # streaming mode: blocks recomputed on every request
+        calls.append(v)
+        return views[v]
+
+    info = BlockInformation(prior)
+    oracle = BlockGainOracle(info, view_blocks)
+    expected = info.gain(views[1])
+    assert oracle.gain(1) == expected and oracle.gain(2) > 0 and oracle.evaluated == 2
+    oracle.commit(1)
+    assert oracle.evaluated == 2 and calls == [1, 2, 1]
+    assert oracle.gain(1) < expected  # the committed information is used: diminishing returns
+    oracle.reset_counts()
+    assert oracle.evaluated == 0

@@ -1,4 +1,8 @@
-"""Types shared by the selectors: the context a selector receives, what it returns, the oracle it may call."""
+"""Types shared by the selectors: the context a selector receives, what it returns, the oracle it may call.
+
+A selector depends only on the `GainOracle` protocol (gain, commit, evaluated), never on how the Fisher blocks are
+made, and never changes training state: it returns a `Selection` and `train.py` moves the chosen views.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,40 +16,51 @@ from utils.errors import UserError
 class GainOracle(Protocol):
     """Marginal information gain of a view given the views committed so far; counts its own evaluations."""
 
-    evaluated: int
+    evaluated: int  # gains computed so far (every call of `gain`)
 
     def gain(self, view_id: int) -> float:
-        """rho(v | S): one oracle evaluation."""
+        """rho(v | S) for the current S: one oracle evaluation."""
 
     def commit(self, view_id: int) -> None:
-        """Add view `view_id` to S (not an oracle evaluation)."""
+        """S <- S + {v} (not an oracle evaluation)."""
 
 
 @dataclass(frozen=True)
 class OracleCalls:
-    conservative: int  # every sampled candidate counts (the count the paper reports)
+    """Oracle accounting of one selection step."""
+
+    conservative: int  # every sampled candidate counts once per pick (the count the paper reports)
     evaluated: int  # gains actually computed (lazy evaluation saves some)
 
 
 @dataclass(frozen=True)
 class Selection:
+    """What a selector returns for one acquisition step."""
+
     ids: list[int]  # chosen view ids, in pick order
-    gains: list[float]  # the marginal gain of each pick when it was chosen (0.0 for selectors without an oracle)
+    gains: list[float]  # marginal gain of each pick when chosen (0.0 for selectors without an oracle)
     oracle_calls: OracleCalls
 
 
 @dataclass(frozen=True)
 class SelectionContext:
-    candidate_ids: list[int]  # the pool V_c (views not yet in training)
-    oracle: GainOracle | None  # None for selectors with uses_oracle = False
-    generator: torch.Generator  # seeded per stage
+    """Everything a selector may use."""
+
+    candidate_ids: list[int]  # the pool V_c (views not yet in training), distinct ids
+    oracle: GainOracle | None  # may be None only for selectors with uses_oracle = False
+    generator: torch.Generator  # seeded per stage by the caller: a fresh draw per stage
     stage: int
 
 
 class Selector:
-    """Base class: choose `k` of the candidates. Selectors never change training state."""
+    """Base class: choose `k` of the candidates, committing each pick to `ctx.oracle` as it goes.
 
-    uses_oracle: bool = True
+    When k >= M (the number of candidates) every candidate is returned: the step is run with k = M, so the
+    picks come in selection order with their gains and the counts equal the closed forms for k = M.
+    """
+
+    name: str = ""  # set by `register_selector`
+    uses_oracle: bool = True  # False: `select` calls no gains (it still commits its picks when given an oracle)
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         raise NotImplementedError
@@ -55,3 +70,10 @@ def check_k(k: int) -> None:
     """K must be positive (one clear line otherwise)."""
     if k <= 0:
         raise UserError(f"--views_per_step (K) must be positive, got {k}")
+
+
+def check_eps(eps: float) -> float:
+    """The accuracy parameter of the stochastic selectors must lie in (0, 1)."""
+    if not 0.0 < eps < 1.0:
+        raise UserError(f"--eps must lie in (0, 1), got {eps}")
+    return float(eps)

@@ -1,44 +1,50 @@
-"""`lite_gs`: LiTe-GS (Algorithm 1), stochastic greedy with a lazy priority queue.
+"""`lite_gs`: LiTe-GS (the paper's Algorithm 1), stochastic greedy with a lazy priority queue.
 
-At pick j a fresh random subset R of size p_j = max(1, floor((M - j) ln(1/eps) / K)) of the not-yet-chosen
-candidates is drawn; the best member of R by true marginal gain is found by lazy evaluation over gains cached
-since the start of the stage. Conservative count: sum_j p_j (about M ln(1/eps) per step, independent of K).
+Cached gains gamma_v = +inf for every candidate at the start of the stage. At pick j (0-based) a fresh random subset
+R of size p_j = max(1, floor((M - j) ln(1/eps) / K)) (capped at M - j) is drawn from the not-yet-chosen candidates
+with the stage's generator; the best member of R is found by lazy evaluation over the cached gains
+(`lazy_greedy_pick`); the winner is committed to the oracle. Conservative count: sum_j p_j, about M ln(1/eps) per
+step whatever K; evaluated: the gains actually computed.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 
-from active.base import OracleCalls, Selection, SelectionContext, Selector, check_k
+from active.base import OracleCalls, Selection, SelectionContext, Selector, check_eps, check_k
 from active.oracle_counts import subset_size
 from active.registry import register_selector
 from active.selectors.lazy_greedy import lazy_greedy_pick
-from utils.errors import UserError
 
 
-def check_eps(eps: float) -> float:
-    if not 0.0 < eps < 1.0:
-        raise UserError(f"--eps must lie in (0, 1), got {eps}")
-    return float(eps)
+@dataclass(frozen=True)
+class LiteGSConfig:
+    eps: float = 0.1  # accuracy parameter in (0, 1): guarantee 1 - exp(-(1 - eps)), ~M ln(1/eps) oracles per step
+
+    def __post_init__(self) -> None:
+        check_eps(self.eps)
 
 
-@register_selector("lite_gs")
+@register_selector("lite_gs", config=LiteGSConfig)
 class LiteGSSelector(Selector):
-    """Stochastic lazy greedy; `eps` in (0, 1) trades oracle evaluations against the (1 - 1/e - eps) guarantee."""
+    """Stochastic lazy greedy with a fresh subset per pick."""
 
-    def __init__(self, eps: float = 0.1):
-        self.eps = check_eps(eps)
+    def __init__(self, config: LiteGSConfig = LiteGSConfig()):
+        self.config = config
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         check_k(k)
         remaining = sorted(ctx.candidate_ids)
         m = len(remaining)
+        k = min(k, m)
         cached = {v: math.inf for v in remaining}
         ids, gains, conservative, evaluated = [], [], 0, 0
-        for j in range(min(k, m)):
-            p = subset_size(m - j, k, self.eps)
-            subset = [remaining[i] for i in torch.randperm(len(remaining), generator=ctx.generator)[:p].tolist()]
+        for j in range(k):
+            p = subset_size(m - j, k, self.config.eps)
+            draw = torch.randperm(len(remaining), generator=ctx.generator)[:p].tolist()
+            subset = [remaining[i] for i in draw]
             conservative += p
             view, gain, calls = lazy_greedy_pick(subset, cached, ctx.oracle)
             evaluated += calls

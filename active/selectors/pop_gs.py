@@ -7,15 +7,18 @@ from active.registry import register_selector
 
 @register_selector("pop_gs")
 class PopGSSelector(Selector):
-    """Greedy maximisation of the log-det information gain; M - j oracles at pick j."""
+    """Greedy maximisation of the log-det information gain: M - j oracles at pick j, ties to the lowest id.
+
+    Counts: conservative = evaluated = sum_{j < min(K, M)} (M - j).
+    """
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         check_k(k)
         remaining = sorted(ctx.candidate_ids)
         ids, gains, calls = [], [], 0
         for _ in range(min(k, len(remaining))):
-            best, best_gain = None, float("-inf")
-            for view in remaining:  # ascending ids: ties go to the lowest id (strict >)
+            best, best_gain = remaining[0], float("-inf")
+            for view in remaining:  # ascending ids and a strict '>': ties go to the lowest id
                 gain = ctx.oracle.gain(view)
                 calls += 1
                 if gain > best_gain:

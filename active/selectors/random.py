@@ -1,4 +1,4 @@
-"""`random`: K candidates drawn uniformly without replacement (seeded; a fresh draw per stage)."""
+"""`random`: K candidates drawn uniformly without replacement with the stage's generator (no oracle calls)."""
 from __future__ import annotations
 
 import torch
@@ -9,7 +9,11 @@ from active.registry import register_selector
 
 @register_selector("random")
 class RandomSelector(Selector):
-    """Uniformly random views; the baseline that uses no information oracle."""
+    """Uniformly random views; the baseline that uses no information oracle.
+
+    Gains are reported as 0.0 and the counts as (0, 0). When the context carries an oracle the picks are still
+    committed to it, so its information state matches the chosen set as for every other selector.
+    """
 
     uses_oracle = False
 
@@ -17,4 +21,7 @@ class RandomSelector(Selector):
         check_k(k)
         order = torch.randperm(len(ctx.candidate_ids), generator=ctx.generator)[:k].tolist()
         ids = [ctx.candidate_ids[i] for i in order]
+        if ctx.oracle is not None:
+            for view in ids:
+                ctx.oracle.commit(view)
         return Selection(ids, [0.0] * len(ids), OracleCalls(0, 0))

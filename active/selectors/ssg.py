@@ -1,31 +1,43 @@
-"""`ssg`: static-subset greedy (ablation). Same subset size as lite_gs, but the subset is sampled once per stage
-and every pick is a lazy greedy step over what is left of it. Conservative count: sum_j (p - j)."""
+"""`ssg`: static-subset greedy (the paper's ablation of LiTe-GS).
+
+One subset of size p = max(K, floor(M ln(1/eps) / K)) is drawn at the start of the stage (the lite_gs size for
+j = 0; at least K members so that K views can be chosen) and every pick is a lazy greedy step over what is left of
+it, with gains cached across the picks. Conservative count: sum_{j < K} (p - j).
+"""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 
-from active.base import OracleCalls, Selection, SelectionContext, Selector, check_k
-from active.oracle_counts import subset_size
+from active.base import OracleCalls, Selection, SelectionContext, Selector, check_eps, check_k
+from active.oracle_counts import ssg_subset_size
 from active.registry import register_selector
 from active.selectors.lazy_greedy import lazy_greedy_pick
-from active.selectors.lite_gs import check_eps
 
 
-@register_selector("ssg")
+@dataclass(frozen=True)
+class SSGConfig:
+    eps: float = 0.1  # accuracy parameter in (0, 1); sets the subset size exactly as for lite_gs
+
+    def __post_init__(self) -> None:
+        check_eps(self.eps)
+
+
+@register_selector("ssg", config=SSGConfig)
 class SSGSelector(Selector):
-    """Lazy greedy over one random subset of size max(p, K) drawn at the start of the stage."""
+    """Lazy greedy over one random subset drawn once per stage."""
 
-    def __init__(self, eps: float = 0.1):
-        self.eps = check_eps(eps)
+    def __init__(self, config: SSGConfig = SSGConfig()):
+        self.config = config
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         check_k(k)
         candidates = sorted(ctx.candidate_ids)
         m = len(candidates)
         k = min(k, m)
-        p = max(subset_size(m, k, self.eps), k)  # at least K members, so K views can be chosen
+        p = ssg_subset_size(m, k, self.config.eps) if k else 0  # no candidates: nothing to draw
         subset = [candidates[i] for i in torch.randperm(m, generator=ctx.generator)[:p].tolist()]
         cached = {v: math.inf for v in subset}
         ids, gains, conservative, evaluated = [], [], 0, 0

@@ -1,4 +1,8 @@
-"""Dataset loaders: Blender/NeRF-synthetic (`transforms_*.json`) and COLMAP (`sparse/0`), with clear errors."""
+"""Dataset loaders: Blender/NeRF-synthetic (`transforms_*.json`) and COLMAP (`sparse/0`), with clear errors.
+
+Both produce a `SceneInfo` whose cameras are in the OpenCV convention (world-to-camera, x right, y down,
+z forward) with images composited on the background and resampled to the requested `resolution`.
+"""
 from __future__ import annotations
 
 import json
@@ -17,18 +21,23 @@ from utils.errors import UserError
 
 log = logging.getLogger(__name__)
 
-# OpenGL/Blender camera axes (x right, y up, z back) -> OpenCV (x right, y down, z forward).
-_GL_TO_CV = torch.diag(torch.tensor([1.0, -1.0, -1.0, 1.0], dtype=torch.float64))
+# OpenGL/Blender camera axes (x right, y up, z back) -> OpenCV (x right, y down, z forward): flip y and z.
+GL_TO_CV = torch.diag(torch.tensor([1.0, -1.0, -1.0, 1.0], dtype=torch.float64))
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
 @dataclass
 class PointCloud:
+    """Initial points (SfM or random) with colours."""
+
     points: torch.Tensor  # [P, 3]
     colors: torch.Tensor  # [P, 3] in [0, 1]
 
 
 @dataclass
 class SceneInfo:
+    """Everything a dataset provides: cameras, optional SfM points, the normalisation extent."""
+
     train_cameras: list[Camera]
     test_cameras: list[Camera]
     point_cloud: PointCloud | None
@@ -47,25 +56,31 @@ def target_size(width: int, height: int, resolution: int) -> tuple[int, int]:
     return resolution, max(1, round(height * resolution / width))
 
 
-def _load_image(path: Path, size: tuple[int, int], background: torch.Tensor, where: str) -> tuple[torch.Tensor, tuple]:
-    """RGB(A) image resized to `size` with box filtering and composited on `background`. [3, H, W]"""
+def load_composited(path: Path, size: tuple[int, int], background: torch.Tensor) -> torch.Tensor:
+    """An image file resized to `size` (box filter, alpha-aware) and composited on `background` [3]. [3, H, W]"""
+    with Image.open(path) as im:
+        rgba = im.convert("RGBA")
+    if rgba.size != size:
+        rgba = rgba.resize(size, Image.Resampling.BOX)  # Pillow resamples RGBA premultiplied by alpha
+    t = torch.from_numpy(np.asarray(rgba, dtype=np.float32) / 255.0).permute(2, 0, 1)  # [4, H, W]
+    rgb, alpha = t[:3], t[3:4]
+    return (rgb * alpha + background[:, None, None] * (1 - alpha)).contiguous()
+
+
+def _image_size(path: Path, where: str) -> tuple[int, int]:
+    """(width, height) of an image file, or a UserError naming `where` and the file."""
     if not path.is_file():
         raise UserError(f"{where}: image file {path} is missing")
     try:
         with Image.open(path) as im:
-            original = im.size
-            rgba = im.convert("RGBA").resize(size, Image.Resampling.BOX) if im.size != size else im.convert("RGBA")
-            arr = np.asarray(rgba, dtype=np.float32) / 255.0
+            return im.size
     except OSError as exc:
-        raise UserError(f"{where}: cannot read image {path} ({exc})") from None
-    t = torch.from_numpy(arr).permute(2, 0, 1)
-    rgb, alpha = t[:3], t[3:4]
-    return rgb * alpha + background[:, None, None] * (1 - alpha), original
+        raise UserError(f"{where}: cannot read image {path} ({exc}); replace the file") from None
 
 
 def scene_extent(cameras: list[Camera]) -> float:
     """3DGS 'nerf normalization': 1.1 x the largest distance of a camera centre from their mean."""
-    centers = torch.stack([c.camera_center.double() for c in cameras])
+    centers = torch.stack([c.camera_center.double().cpu() for c in cameras])  # [C, 3]
     return float(1.1 * (centers - centers.mean(0)).norm(dim=1).max().clamp_min(1e-6))
 
 
@@ -79,98 +94,138 @@ def _read_transforms(path: Path) -> dict:
         raise UserError(f"{path} is not valid JSON ({exc}); fix or regenerate it") from None
     if not isinstance(data, dict) or not isinstance(data.get("frames"), list):
         raise UserError(f"{path}: missing key 'frames' (a list of frames with file_path and transform_matrix)")
+    if not data["frames"]:
+        raise UserError(f"{path}: 'frames' is empty; the split needs at least one frame")
     return data
 
 
-def _blender_cameras(source: Path, split: str, background: torch.Tensor, resolution: int,
-                     uid_offset: int) -> list[Camera]:
-    path = source / f"transforms_{split}.json"
-    data = _read_transforms(path)
-    cameras: list[Camera] = []
-    first_size = None
-    for idx, frame in enumerate(data["frames"]):
-        where = f"{path.name} frame {idx}"
-        if not isinstance(frame, dict) or "file_path" not in frame or "transform_matrix" not in frame:
-            raise UserError(f"{where}: needs 'file_path' and 'transform_matrix'")
-        try:
-            c2w = torch.tensor(frame["transform_matrix"], dtype=torch.float64)
-        except (TypeError, ValueError):
-            raise UserError(f"{where}: 'transform_matrix' is not a 4x4 list of numbers") from None
-        if c2w.shape != (4, 4) or not torch.isfinite(c2w).all():
-            raise UserError(f"{where}: 'transform_matrix' must be a finite 4x4 matrix, got shape {tuple(c2w.shape)}")
-        file_path = source / frame["file_path"]
-        if file_path.suffix.lower() not in (".png", ".jpg", ".jpeg"):
-            file_path = file_path.with_name(file_path.name + ".png")
-        if not file_path.is_file():
-            raise UserError(f"{where}: image file {file_path} is missing")
-        with Image.open(file_path) as im:
-            full_w, full_h = im.size
-        if first_size is None:
-            first_size = (full_w, full_h)
-        elif (full_w, full_h) != first_size:
-            raise UserError(f"{where}: image {file_path.name} is {full_w}x{full_h} but earlier images are "
-                            f"{first_size[0]}x{first_size[1]}; all images of a split must have one size")
-        w, h = target_size(full_w, full_h, resolution)
-        fx, fy, cx, cy = _blender_intrinsics(data, frame, full_w, full_h, where)
-        sx, sy = w / full_w, h / full_h
-        image, _ = _load_image(file_path, (w, h), background, where)
-        viewmat = torch.linalg.inv(c2w @ _GL_TO_CV).float()
-        cameras.append(Camera(uid_offset + idx, file_path.stem, viewmat, fx * sx, fy * sy, cx * sx, cy * sy, w, h,
-                              image))
-    if not cameras:
-        raise UserError(f"{path} has no frames")
-    return cameras
+def _blender_image_path(source: Path, file_path: str) -> Path:
+    """The image of a frame: `file_path` as given if it exists, else with `.png` appended (NeRF-synthetic)."""
+    given = source / file_path
+    if given.is_file() or given.suffix.lower() in IMAGE_SUFFIXES:
+        return given
+    return given.with_name(given.name + ".png")
 
 
-def _blender_intrinsics(data: dict, frame: dict, width: int, height: int, where: str):
-    get = lambda key: frame.get(key, data.get(key))
+def _number(value, key: str, where: str) -> float:
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise UserError(f"{where}: '{key}' must be a number, got {value!r}") from None
+    if not math.isfinite(out) or (out <= 0 and key not in ("cx", "cy")):
+        raise UserError(f"{where}: '{key}' must be a finite positive number, got {value!r}")
+    return out
+
+
+def _blender_intrinsics(data: dict, frame: dict, width: int, height: int, where: str
+                        ) -> tuple[float, float, float, float]:
+    """(fx, fy, cx, cy) for an image of `width` x `height`; per-frame keys override the file's.
+
+    Focal lengths and principal points given with `w`/`h` are in those pixels and are scaled to the image.
+    """
+    def get(key):
+        value = frame.get(key, data.get(key))
+        return None if value is None else _number(value, key, where)
+
+    declared_w, declared_h = get("w") or width, get("h") or height
     fl_x, fl_y = get("fl_x"), get("fl_y")
     if fl_x is None:
         angle = get("camera_angle_x")
         if angle is None:
-            raise UserError(f"{where}: needs 'camera_angle_x' or 'fl_x' (focal length)")
-        fl_x = 0.5 * width / math.tan(0.5 * float(angle))
+            raise UserError(f"{where}: needs 'camera_angle_x' or 'fl_x' (the focal length)")
+        fl_x = 0.5 * declared_w / math.tan(0.5 * angle)
     fl_y = fl_x if fl_y is None else fl_y
     cx, cy = get("cx"), get("cy")
-    return float(fl_x), float(fl_y), float(width / 2 if cx is None else cx), float(height / 2 if cy is None else cy)
+    cx = declared_w / 2 if cx is None else cx
+    cy = declared_h / 2 if cy is None else cy
+    sx, sy = width / declared_w, height / declared_h
+    return fl_x * sx, fl_y * sy, cx * sx, cy * sy
+
+
+def _blender_c2w(frame: dict, where: str) -> torch.Tensor:
+    """The frame's camera-to-world matrix (Blender axes). [4, 4] float64"""
+    try:
+        c2w = torch.tensor(frame["transform_matrix"], dtype=torch.float64)
+    except (TypeError, ValueError):
+        raise UserError(f"{where}: 'transform_matrix' is not a 4x4 list of numbers") from None
+    if c2w.shape != (4, 4) or not torch.isfinite(c2w).all():
+        raise UserError(f"{where}: 'transform_matrix' must be a finite 4x4 matrix, got shape {tuple(c2w.shape)}")
+    if abs(float(torch.linalg.det(c2w[:3, :3]))) < 1e-9:
+        raise UserError(f"{where}: 'transform_matrix' has a singular rotation part; fix the pose")
+    return c2w
 
 
 def read_blender(source: Path, white_background: bool, resolution: int) -> SceneInfo:
+    """Cameras of `transforms_train.json` and (when present) `transforms_test.json`."""
     background = torch.ones(3) if white_background else torch.zeros(3)
-    train = _blender_cameras(source, "train", background, resolution, 0)
-    test = (_blender_cameras(source, "test", background, resolution, len(train))
-            if (source / "transforms_test.json").is_file() else [])
-    return SceneInfo(train, test, None, scene_extent(train), "blender")
+    splits = [("train", _read_transforms(source / "transforms_train.json"))]
+    if (source / "transforms_test.json").is_file():
+        splits.append(("test", _read_transforms(source / "transforms_test.json")))
+    cameras: dict[str, list[Camera]] = {"train": [], "test": []}
+    first: tuple[str, tuple[int, int]] | None = None  # (image, size) of the first frame, for the size check
+    uid = 0
+    for split, data in splits:
+        for idx, frame in enumerate(data["frames"]):
+            where = f"transforms_{split}.json frame {idx}"
+            if not isinstance(frame, dict) or "file_path" not in frame or "transform_matrix" not in frame:
+                raise UserError(f"{where}: needs 'file_path' and 'transform_matrix'")
+            if not isinstance(frame["file_path"], str):
+                raise UserError(f"{where}: 'file_path' must be a string, got {frame['file_path']!r}")
+            c2w = _blender_c2w(frame, where)
+            path = _blender_image_path(source, frame["file_path"])
+            full = _image_size(path, where)
+            if first is None:
+                first = (path.name, full)
+            elif full != first[1]:
+                raise UserError(f"{where}: image {path.name} is {full[0]}x{full[1]} but {first[0]} is "
+                                f"{first[1][0]}x{first[1][1]}; all images of a dataset must have one size")
+            fx, fy, cx, cy = _blender_intrinsics(data, frame, full[0], full[1], where)
+            w, h = target_size(full[0], full[1], resolution)
+            sx, sy = w / full[0], h / full[1]
+            viewmat = torch.linalg.inv(c2w @ GL_TO_CV).float()
+            image = load_composited(path, (w, h), background)
+            cameras[split].append(Camera(uid, path.stem, viewmat, fx * sx, fy * sy, cx * sx, cy * sy, w, h, image))
+            uid += 1
+    return SceneInfo(cameras["train"], cameras["test"], None, scene_extent(cameras["train"]), "blender")
 
 
 # ----------------------------------------------------------------------------------------------- COLMAP
 
 
 def read_colmap(source: Path, images: str, resolution: int, eval: bool, llffhold: int) -> SceneInfo:
-    cams, imgs, (xyz, rgb) = colmap_io.read_model(source / "sparse" / "0")
+    """Cameras from `sparse/0` and images from `source/images`; every `llffhold`-th image is test under `eval`."""
+    if eval and llffhold < 2:
+        raise UserError(f"--llffhold must be at least 2 (every N-th image is held out), got {llffhold}")
+    sparse = source / "sparse" / "0"
+    cams, imgs, (xyz, rgb) = colmap_io.read_model(sparse)
     image_dir = source / images
+    if not image_dir.is_dir():
+        raise UserError(f"COLMAP images folder {image_dir} does not exist; pass --images with the folder name")
+    if not imgs:
+        raise UserError(f"COLMAP model in {sparse} has no images")
     cameras: list[Camera] = []
-    warned = False
+    warned = False  # one distortion warning per dataset
     for idx, im in enumerate(sorted(imgs.values(), key=lambda i: i.name)):
+        where = f"COLMAP image {im.name}"
         cam = cams.get(im.camera_id)
         if cam is None:
-            raise UserError(f"COLMAP image {im.name} refers to camera {im.camera_id}, which is not in cameras")
+            raise UserError(f"{where} refers to camera {im.camera_id}, which is not in the cameras file")
         fx, fy, cx, cy, distorted = colmap_io.pinhole_intrinsics(cam)
         if distorted and not warned:
-            log.warning("COLMAP camera model %s has distortion; treating it as a pinhole (undistort for accuracy)",
-                        cam.model)
+            log.warning("COLMAP camera model %s has lens distortion; treating it as a pinhole "
+                        "(undistort the images with COLMAP for accuracy)", cam.model)
             warned = True
-        w, h = target_size(cam.width, cam.height, resolution)
-        image, original = _load_image(image_dir / im.name, (w, h), torch.zeros(3), f"COLMAP image {im.name}")
-        sx, sy = w / original[0], h / original[1]
-        scale_x, scale_y = original[0] / cam.width, original[1] / cam.height  # images may be pre-downscaled
+        path = image_dir / im.name
+        full = _image_size(path, where)
+        # The images may be stored smaller than the calibration (e.g. an images_4 folder): scale to the file.
+        w, h = target_size(full[0], full[1], resolution)
+        sx, sy = w / cam.width, h / cam.height
         viewmat = torch.eye(4, dtype=torch.float64)
         viewmat[:3, :3] = torch.from_numpy(colmap_io.qvec_to_rotmat(im.qvec))
         viewmat[:3, 3] = torch.from_numpy(im.tvec)
-        cameras.append(Camera(idx, Path(im.name).stem, viewmat.float(), fx * scale_x * sx, fy * scale_y * sy,
-                              cx * scale_x * sx, cy * scale_y * sy, w, h, image))
-    if not cameras:
-        raise UserError(f"COLMAP model in {source / 'sparse' / '0'} has no images")
+        image = load_composited(path, (w, h), torch.zeros(3))
+        cameras.append(Camera(idx, Path(im.name).stem, viewmat.float(), fx * sx, fy * sy, cx * sx, cy * sy, w, h,
+                              image))
     if eval:
         train = [c for i, c in enumerate(cameras) if i % llffhold != 0]
         test = [c for i, c in enumerate(cameras) if i % llffhold == 0]
@@ -185,15 +240,24 @@ def read_colmap(source: Path, images: str, resolution: int, eval: bool, llffhold
 
 def load_scene_info(source_path: str, *, white_background: bool = False, resolution: int = -1, eval: bool = False,
                     images: str = "images", llffhold: int = 8, device: str = "cpu") -> SceneInfo:
-    """Detect the dataset layout and load it; every problem is a one-line `UserError`."""
+    """Detect the dataset layout (Blender or COLMAP) and load it.
+
+    Args:
+        source_path: dataset root holding `transforms_train.json` or `sparse/0/`.
+        white_background: composite RGBA images on white (else black).
+        resolution: -1/1 as is, 2/4/8 downscale factor, other positive values a target width in pixels.
+        eval: COLMAP only: hold out every `llffhold`-th image (sorted by name) as test.
+        images: COLMAP image folder name under `source_path`.
+        device: where the cameras' tensors and the point cloud go.
+    Every problem with the input is a one-line `UserError`.
+    """
     source = Path(source_path)
     if not source_path or not source.exists():
         raise UserError(f"dataset path {source_path!r} does not exist; pass -s/--source_path with a Blender or "
                         "COLMAP dataset (or make the built-in one: python -m scene.builtin data/builtin)")
     if not source.is_dir() or not any(source.iterdir()):
-        raise UserError(f"dataset path {source} is empty or not a directory")
-    if resolution != -1:
-        target_size(100, 100, resolution)  # validates the flag before any image is read
+        raise UserError(f"dataset path {source} is empty or not a directory; point -s at a dataset root")
+    target_size(100, 100, resolution)  # validates the flag before any image is read
     if (source / "transforms_train.json").is_file():
         info = read_blender(source, white_background, resolution)
     elif (source / "sparse" / "0").is_dir():
@@ -201,7 +265,8 @@ def load_scene_info(source_path: str, *, white_background: bool = False, resolut
     else:
         raise UserError(f"{source} is neither a Blender dataset (transforms_train.json) nor a COLMAP one "
                         "(sparse/0/cameras.bin|txt); point -s at the dataset root")
-    if device != "cpu":
-        info.train_cameras = [c.to(device) for c in info.train_cameras]
-        info.test_cameras = [c.to(device) for c in info.test_cameras]
+    info.train_cameras = [c.to(device) for c in info.train_cameras]
+    info.test_cameras = [c.to(device) for c in info.test_cameras]
+    if info.point_cloud is not None:
+        info.point_cloud = PointCloud(info.point_cloud.points.to(device), info.point_cloud.colors.to(device))
     return info

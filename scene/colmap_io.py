@@ -42,7 +42,14 @@ def _read(fh, fmt: str):
     return struct.unpack("<" + fmt, data)
 
 
+def _skip(fh, size: int) -> None:
+    """Skip `size` bytes, raising EOFError when the file ends first."""
+    if len(fh.read(size)) != size:
+        raise EOFError
+
+
 def read_cameras_binary(path: Path) -> dict[int, ColmapCamera]:
+    """`cameras.bin`: count, then per camera (id i32, model i32, width u64, height u64, params f64 x n)."""
     cams = {}
     with open(path, "rb") as fh:
         (count,) = _read(fh, "Q")
@@ -54,6 +61,7 @@ def read_cameras_binary(path: Path) -> dict[int, ColmapCamera]:
 
 
 def read_images_binary(path: Path) -> dict[int, ColmapImage]:
+    """`images.bin`: count, then per image (id, qvec wxyz, tvec, camera id, NUL-ended name, 2D points)."""
     images = {}
     with open(path, "rb") as fh:
         (count,) = _read(fh, "Q")
@@ -66,12 +74,13 @@ def read_images_binary(path: Path) -> dict[int, ColmapImage]:
                     raise EOFError
                 name += ch
             (num_points,) = _read(fh, "Q")
-            fh.read(24 * num_points)  # (x, y, point3D_id) per 2D point: not needed
+            _skip(fh, 24 * num_points)  # (x, y, point3D_id) per 2D point: not needed
             images[iid] = ColmapImage(iid, qvec, tvec, cam_id, name.decode())
     return images
 
 
 def read_points_binary(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """`points3D.bin` -> (xyz [P,3] float64, rgb [P,3] uint8); errors and tracks are skipped."""
     xyz, rgb = [], []
     with open(path, "rb") as fh:
         (count,) = _read(fh, "Q")
@@ -80,7 +89,7 @@ def read_points_binary(path: Path) -> tuple[np.ndarray, np.ndarray]:
             xyz.append(vals[1:4])
             rgb.append(vals[4:7])
             (track_len,) = _read(fh, "Q")
-            fh.read(8 * track_len)
+            _skip(fh, 8 * track_len)
     return np.array(xyz, dtype=np.float64).reshape(-1, 3), np.array(rgb, dtype=np.uint8).reshape(-1, 3)
 
 
@@ -92,6 +101,7 @@ def _text_lines(path: Path):
 
 
 def read_cameras_text(path: Path) -> dict[int, ColmapCamera]:
+    """`cameras.txt`: CAMERA_ID MODEL WIDTH HEIGHT PARAMS[] per line."""
     cams = {}
     for line in _text_lines(path):
         parts = line.split()
@@ -101,28 +111,30 @@ def read_cameras_text(path: Path) -> dict[int, ColmapCamera]:
 
 
 def read_images_text(path: Path) -> dict[int, ColmapImage]:
+    """`images.txt`: per image a header line (IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME) then a 2D-points line.
+
+    The points line may be empty, so records are read in pairs of non-comment lines; blank lines where a header
+    is expected are skipped.
+    """
     images = {}
-    lines = list(_text_lines(path))
-    # Each image has two lines; the second (2D points) may be empty and then is skipped by _text_lines,
-    # so parse by recognising header lines: 10 fields with a file name last.
-    for line in lines:
-        parts = line.split()
-        if len(parts) == 10 and not _is_number(parts[9]):
-            iid = int(parts[0])
-            images[iid] = ColmapImage(iid, np.array([float(p) for p in parts[1:5]]),
-                                      np.array([float(p) for p in parts[5:8]]), int(parts[8]), parts[9])
+    lines = [line.strip() for line in path.read_text().splitlines() if not line.lstrip().startswith("#")]
+    i = 0
+    while i < len(lines):
+        if not lines[i]:
+            i += 1
+            continue
+        parts = lines[i].split(maxsplit=9)
+        if len(parts) != 10:
+            raise ValueError(f"images.txt header line has {len(parts)} fields, expected 10")
+        iid = int(parts[0])
+        images[iid] = ColmapImage(iid, np.array([float(p) for p in parts[1:5]]),
+                                  np.array([float(p) for p in parts[5:8]]), int(parts[8]), parts[9])
+        i += 2  # skip the 2D points line
     return images
 
 
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
-
-
 def read_points_text(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """`points3D.txt`: POINT3D_ID X Y Z R G B ERROR TRACK[] per line -> (xyz [P,3], rgb [P,3] uint8)."""
     xyz, rgb = [], []
     for line in _text_lines(path):
         parts = line.split()
@@ -146,6 +158,7 @@ def read_model(sparse_dir: Path):
 
 
 def qvec_to_rotmat(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix [3,3] of a wxyz quaternion [4] (normalised here)."""
     w, x, y, z = q / np.linalg.norm(q)
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
@@ -153,11 +166,15 @@ def qvec_to_rotmat(q: np.ndarray) -> np.ndarray:
 
 
 def pinhole_intrinsics(cam: ColmapCamera) -> tuple[float, float, float, float, bool]:
-    """(fx, fy, cx, cy, distorted) treating every supported model as a pinhole."""
+    """(fx, fy, cx, cy, distorted) treating every supported model as a pinhole (distortion ignored)."""
     p = cam.params
+    expected = MODEL_IDS.get(cam.model, (None, len(p)))[1]
+    if len(p) != expected:
+        raise UserError(f"COLMAP camera {cam.id} ({cam.model}) has {len(p)} parameters, expected {expected}; "
+                        "re-export the model from COLMAP")
     if cam.model in ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL"):
-        return p[0], p[0], p[1], p[2], cam.model != "SIMPLE_PINHOLE"
+        return float(p[0]), float(p[0]), float(p[1]), float(p[2]), cam.model != "SIMPLE_PINHOLE"
     if cam.model in ("PINHOLE", "OPENCV"):
-        return p[0], p[1], p[2], p[3], cam.model == "OPENCV"
+        return float(p[0]), float(p[1]), float(p[2]), float(p[3]), cam.model == "OPENCV"
     raise UserError(f"COLMAP camera {cam.id} uses model {cam.model}; supported: PINHOLE, SIMPLE_PINHOLE, "
                     "SIMPLE_RADIAL, RADIAL, OPENCV (undistort the images with COLMAP first)")

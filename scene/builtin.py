@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 from pathlib import Path
 
 import torch
 
 from gaussian_renderer import rasterization
+from scene.cameras import look_at
+from scene.dataset_readers import GL_TO_CV
 from utils.errors import UserError, run_cli
 from utils.image import save_image
 from utils.io import write_json
@@ -23,6 +26,8 @@ from utils.io import write_json
 CAMERA_RADIUS = 4.0
 CAMERA_ANGLE_X = 0.6911  # NeRF-synthetic field of view
 STAMP = "builtin_scene.json"
+
+log = logging.getLogger(__name__)
 
 
 def _object_points(g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -77,16 +82,12 @@ def hemisphere_positions(count: int, offset: float) -> torch.Tensor:
                                         torch.cos(elevation) * torch.sin(azimuth), torch.sin(elevation)], 1)
 
 
-def look_at(eye: torch.Tensor) -> torch.Tensor:
-    """World-to-camera [4,4] (OpenCV) for a camera at `eye` looking at the origin with +z up."""
-    forward = -eye / eye.norm()
-    right = torch.linalg.cross(forward, torch.tensor([0.0, 0.0, 1.0], dtype=eye.dtype))
-    right = right / right.norm()
-    down = torch.linalg.cross(forward, right)
-    view = torch.eye(4, dtype=eye.dtype)
-    view[:3, :3] = torch.stack([right, down, forward])
-    view[:3, 3] = -view[:3, :3] @ eye
-    return view
+def _read_stamp(stamp: Path) -> dict | None:
+    """The parameters recorded by a finished generation, or None (absent or unreadable: regenerate)."""
+    try:
+        return json.loads(stamp.read_text())
+    except (OSError, ValueError):
+        return None
 
 
 def make_builtin_scene(out_dir: str | Path, seed: int = 0, resolution: int = 128, num_train: int = 100,
@@ -94,31 +95,34 @@ def make_builtin_scene(out_dir: str | Path, seed: int = 0, resolution: int = 128
     """Write the dataset (skipped when `out_dir` already holds one made with the same parameters)."""
     out = Path(out_dir)
     params = {"seed": seed, "resolution": resolution, "num_train": num_train, "num_test": num_test, "version": 1}
-    stamp = out / STAMP
-    if stamp.is_file() and json.loads(stamp.read_text()) == params:
-        return out
     if resolution < 8:
         raise UserError(f"--resolution must be at least 8 pixels, got {resolution}")
+    if num_train < 1 or num_test < 1:
+        raise UserError(f"--num_train and --num_test must be at least 1, got {num_train} and {num_test}")
+    stamp = out / STAMP
+    if _read_stamp(stamp) == params:
+        log.info("built-in scene already in %s", out)
+        return out
+    stamp.unlink(missing_ok=True)  # a crash part-way must not leave a stamp that claims a complete scene
     g = torch.Generator().manual_seed(seed)
     means, colors, scales = _object_points(g)
     n = means.shape[0]
     quats = torch.zeros(n, 4)
     quats[:, 0] = 1
     opacities = torch.full((n,), 0.9)
-    log_scales = torch.log(scales)[:, None].repeat(1, 3)
+    scales3 = scales[:, None].repeat(1, 3)  # isotropic [N, 3]
     focal = 0.5 * resolution / math.tan(0.5 * CAMERA_ANGLE_X)
     intrinsics = torch.tensor([focal, focal, resolution / 2, resolution / 2])
-    gl_from_cv = torch.diag(torch.tensor([1.0, -1.0, -1.0, 1.0], dtype=torch.float64))
     for split, count, offset in (("train", num_train, 0.5), ("test", num_test, 0.25)):
         frames = []
         for idx, eye in enumerate(hemisphere_positions(count, offset)):
             viewmat = look_at(eye)
-            out_img = rasterization(means, quats, torch.exp(log_scales), opacities, colors, viewmat.float(),
+            out_img = rasterization(means, quats, scales3, opacities, colors, viewmat.float(),
                                     intrinsics, resolution, resolution)
             alpha = out_img.alpha.clamp(1e-6, 1)
             straight = (out_img.image / alpha).clamp(0, 1)  # un-premultiply (black background)
             save_image(torch.cat([straight, out_img.alpha[None]]), out / split / f"r_{idx}.png")
-            c2w = torch.linalg.inv(viewmat) @ gl_from_cv
+            c2w = torch.linalg.inv(viewmat) @ GL_TO_CV  # the flip is its own inverse
             frames.append({"file_path": f"./{split}/r_{idx}", "transform_matrix": c2w.tolist()})
         write_json(out / f"transforms_{split}.json", {"camera_angle_x": CAMERA_ANGLE_X, "frames": frames})
     write_json(stamp, params)

@@ -8,16 +8,21 @@ from torch import nn
 
 from gaussian_renderer.sh import num_sh_bases, rgb_to_sh
 from scene import ply_io
+from utils.errors import UserError
 from utils.knn import mean_sq_dist_to_neighbours
 
 STATE_FORMAT_VERSION = 1
 INITIAL_OPACITY = 0.1
+MIN_INIT_SQ_DIST = 1e-7  # 3DGS clamp: coincident points still get a finite log-scale
+MAX_SH_DEGREE = 3  # highest degree the renderer evaluates
 
 
 class GaussianModel:
     """Raw parameters in `params` (means, sh_dc, sh_rest, log_scales, quats (wxyz), logit_opacities [N])."""
 
     def __init__(self, sh_degree: int, params: dict[str, torch.Tensor] | None = None):
+        if not 0 <= sh_degree <= MAX_SH_DEGREE:
+            raise UserError(f"SH degree {sh_degree} is not supported; use --sh_degree between 0 and {MAX_SH_DEGREE}")
         self.max_sh_degree = sh_degree
         self.active_sh_degree = 0
         self.params: dict[str, nn.Parameter] = {}
@@ -63,6 +68,7 @@ class GaussianModel:
         return self.params["means"].device
 
     def increase_sh_degree(self) -> None:
+        """Activate one more SH band, up to `max_sh_degree`."""
         self.active_sh_degree = min(self.active_sh_degree + 1, self.max_sh_degree)
 
     # ---- construction ----------------------------------------------------------------------------------
@@ -76,9 +82,14 @@ class GaussianModel:
             points: positions. [P, 3]
             colors: RGB in [0, 1]. [P, 3]
         """
+        if points.dim() != 2 or points.shape[1] != 3 or colors.shape != points.shape or points.shape[0] == 0:
+            raise UserError(f"initial point cloud must be non-empty [P, 3] points with [P, 3] colours, got "
+                            f"{tuple(points.shape)} and {tuple(colors.shape)}; check the input PLY / points3D file")
+        if not (torch.isfinite(points).all() and torch.isfinite(colors).all()):
+            raise UserError("initial point cloud has NaN or infinite values; clean the input PLY / points3D file")
         points = points.to(device=device, dtype=torch.float32)
         n = points.shape[0]
-        dist2 = mean_sq_dist_to_neighbours(points, k=3).clamp_min(1e-7)  # [P]
+        dist2 = mean_sq_dist_to_neighbours(points, k=3).clamp_min(MIN_INIT_SQ_DIST)  # [P]
         quats = torch.zeros(n, 4, device=device)
         quats[:, 0] = 1.0
         return cls(sh_degree, {
@@ -104,13 +115,16 @@ class GaussianModel:
         return model
 
     def state_dict(self) -> dict:
+        """Named, versioned snapshot: `format_version`, SH degrees and detached copies of `params`."""
         return {"format_version": STATE_FORMAT_VERSION, "max_sh_degree": self.max_sh_degree,
                 "active_sh_degree": self.active_sh_degree,
                 "params": {k: v.detach().clone() for k, v in self.params.items()}}
 
     def load_state_dict(self, state: dict) -> None:
+        """Restore a `state_dict()`; parameters land on this model's device (CPU when it has none yet)."""
         if state.get("format_version") != STATE_FORMAT_VERSION:
-            raise ValueError(f"unknown GaussianModel state version {state.get('format_version')}")
+            raise UserError(f"checkpoint holds GaussianModel state version {state.get('format_version')}, this code "
+                            f"reads version {STATE_FORMAT_VERSION}; resume with the code that wrote it or retrain")
         self.max_sh_degree = state["max_sh_degree"]
         self.active_sh_degree = state["active_sh_degree"]
         device = self.device if self.params else "cpu"

@@ -1,7 +1,6 @@
 """Standard 3DGS PLY files: x y z nx ny nz f_dc_* f_rest_* opacity scale_* rot_* (raw, pre-activation values)."""
 from __future__ import annotations
 
-import math
 import os
 
 import numpy as np
@@ -9,6 +8,8 @@ import torch
 from plyfile import PlyData, PlyElement
 
 from utils.errors import UserError
+
+MAX_PLY_SH_DEGREE = 3  # f_rest counts 0, 9, 24, 45
 
 
 def ply_attribute_names(num_rest: int) -> list[str]:
@@ -19,7 +20,12 @@ def ply_attribute_names(num_rest: int) -> list[str]:
 
 
 def save_ply(path: str | os.PathLike, params: dict[str, torch.Tensor]) -> None:
-    """Write raw parameters; f_rest is stored channel-major ([N, 3, K-1] flattened) as 3DGS does."""
+    """Write raw parameters as binary float32; normals are zero, opacity is a logit and scales are logs.
+
+    f_rest is stored channel-major ([N, 3, K-1] flattened) as 3DGS does, so common splat viewers read the file.
+    Args:
+        params: means [N,3], sh_dc [N,1,3], sh_rest [N,K-1,3], logit_opacities [N], log_scales [N,3], quats [N,4].
+    """
     n = params["means"].shape[0]
     rest = params["sh_rest"].transpose(1, 2).reshape(n, -1)
     columns = torch.cat([params["means"], torch.zeros(n, 3, device=params["means"].device),
@@ -34,23 +40,43 @@ def save_ply(path: str | os.PathLike, params: dict[str, torch.Tensor]) -> None:
 
 
 def load_ply(path: str | os.PathLike) -> tuple[dict[str, torch.Tensor], int]:
-    """Read raw parameters and the SH degree; a foreign or corrupt file is a one-line `UserError`."""
+    """Read raw parameters and the SH degree (0..3, from the f_rest count) of a standard 3DGS PLY.
+
+    Normals are optional (some exporters drop them). A missing, corrupt, truncated or foreign file is a one-line
+    `UserError` naming the file and, for a foreign file, the first missing property.
+    Returns:
+        {means [N,3], sh_dc [N,1,3], sh_rest [N,K-1,3], logit_opacities [N], log_scales [N,3], quats [N,4]}
+        as float32 CPU tensors, and the SH degree.
+    """
+    if not os.path.isfile(path):
+        raise UserError(f"PLY file {path} does not exist; check the path (point clouds are under "
+                        "point_cloud/iteration_N/point_cloud.ply)")
     try:
-        vertex = PlyData.read(str(path))["vertex"]
+        ply = PlyData.read(str(path))
+        if "vertex" not in [el.name for el in ply.elements]:
+            raise UserError(f"{path} has no 'vertex' element, so it is not a 3DGS point cloud; "
+                            "point to a PLY written by train.py")
+        vertex = ply["vertex"]
         names = [p.name for p in vertex.properties]
         num_rest = sum(1 for nm in names if nm.startswith("f_rest_"))
-        degree = int(round(math.sqrt(num_rest / 3 + 1))) - 1
         missing = [nm for nm in ply_attribute_names(num_rest) if nm not in names and nm not in ("nx", "ny", "nz")]
-        if missing or (degree + 1) ** 2 * 3 != num_rest + 3:
-            raise UserError(f"{path} is not a 3DGS point cloud (missing properties {missing[:4]}, "
-                            f"{num_rest} f_rest values); point to a PLY written by train.py")
-        cols = lambda keys: torch.from_numpy(np.stack([np.asarray(vertex[k], dtype=np.float32) for k in keys], 1))
+        if missing:
+            raise UserError(f"{path} lacks the 3DGS property '{missing[0]}' ({len(missing)} missing), so it is not a "
+                            "3DGS point cloud; point to a PLY written by train.py")
+        degree = next((d for d in range(MAX_PLY_SH_DEGREE + 1) if 3 * ((d + 1) ** 2 - 1) == num_rest), None)
+        if degree is None:
+            raise UserError(f"{path} has {num_rest} f_rest properties, which matches no SH degree 0..3 "
+                            "(0, 9, 24 or 45 expected); point to a PLY written by train.py")
+        columns = {k: np.asarray(vertex[k], dtype=np.float32) for k in ply_attribute_names(num_rest)
+                   if k not in ("nx", "ny", "nz")}
     except UserError:
         raise
-    except Exception as exc:
+    except Exception as exc:  # plyfile raises many types for a damaged header or body
         raise UserError(f"cannot read PLY {path} ({type(exc).__name__}: {exc}); the file is corrupt or truncated, "
                         "retrain or restore it") from None
-    n = len(vertex.data)
+    n = len(columns["x"])
+    cols = lambda keys: torch.from_numpy(np.stack([columns[k] for k in keys], axis=1))  # [N, len(keys)]
+    # f_rest is channel-major on disk: [N, 3, K-1] flattened.
     rest = (cols([f"f_rest_{i}" for i in range(num_rest)]).reshape(n, 3, -1).transpose(1, 2) if num_rest
             else torch.zeros(n, 0, 3))
     params = {

@@ -1,51 +1,105 @@
-"""SSIM and PSNR against slow, explicit twins."""
+"""utils.losses: SSIM against an explicit per-pixel twin, gradients, PSNR and L1 closed forms."""
+from __future__ import annotations
+
 import math
 
+import pytest
 import torch
 
-from utils.image import psnr
-from utils.losses import ssim
+from utils.losses import l1_loss, psnr, ssim
 
 
-def ssim_slow(img1, img2, size=11, sigma=1.5):
-    """Per-pixel window sums with zero padding, float64, written out."""
-    c, h, w = img1.shape
-    x = torch.arange(size, dtype=torch.float64) - size // 2
-    g1 = torch.exp(-x**2 / (2 * sigma**2))
-    g1 = g1 / g1.sum()
-    win = g1[:, None] * g1[None, :]
-    pad = size // 2
-    a = torch.nn.functional.pad(img1.double(), (pad, pad, pad, pad))
-    b = torch.nn.functional.pad(img2.double(), (pad, pad, pad, pad))
+def ssim_reference(img1: torch.Tensor, img2: torch.Tensor) -> float:
+    """Mean SSIM written out: per pixel, explicit sums over the 11x11 window (zero outside the image), float64.
+
+    img1, img2: [C, H, W]. Constants are restated here rather than imported, so a wrong constant fails the test.
+    """
+    size, sigma, c1, c2 = 11, 1.5, 0.01**2, 0.03**2
+    half = size // 2
+    g = [math.exp(-((i - half) ** 2) / (2 * sigma**2)) for i in range(size)]
+    g = [v / sum(g) for v in g]
+    a, b = img1.double().tolist(), img2.double().tolist()
+    channels, height, width = img1.shape
     total = 0.0
-    for ch in range(c):
-        for i in range(h):
-            for j in range(w):
-                pa, pb = a[ch, i:i + size, j:j + size], b[ch, i:i + size, j:j + size]
-                mu1, mu2 = (win * pa).sum(), (win * pb).sum()
-                s1 = (win * pa * pa).sum() - mu1**2
-                s2 = (win * pb * pb).sum() - mu2**2
-                s12 = (win * pa * pb).sum() - mu1 * mu2
-                total += ((2 * mu1 * mu2 + 1e-4) * (2 * s12 + 9e-4)) / ((mu1**2 + mu2**2 + 1e-4) * (s1 + s2 + 9e-4))
-    return total / (c * h * w)
+    for ch in range(channels):
+        for y in range(height):
+            for x in range(width):
+                mu1 = mu2 = e11 = e22 = e12 = 0.0
+                for dy in range(-half, half + 1):
+                    for dx in range(-half, half + 1):
+                        yy, xx = y + dy, x + dx
+                        if not (0 <= yy < height and 0 <= xx < width):
+                            continue  # zero padding
+                        w = g[dy + half] * g[dx + half]
+                        p, q = a[ch][yy][xx], b[ch][yy][xx]
+                        mu1 += w * p
+                        mu2 += w * q
+                        e11 += w * p * p
+                        e22 += w * q * q
+                        e12 += w * p * q
+                s1, s2, s12 = e11 - mu1 * mu1, e22 - mu2 * mu2, e12 - mu1 * mu2
+                total += ((2 * mu1 * mu2 + c1) * (2 * s12 + c2)) / ((mu1 * mu1 + mu2 * mu2 + c1) * (s1 + s2 + c2))
+    return total / (channels * height * width)
 
 
-def test_ssim_matches_slow_twin():
-    g = torch.Generator().manual_seed(0)
-    a = torch.rand(3, 13, 17, generator=g, dtype=torch.float64)
-    b = (a + 0.1 * torch.randn(3, 13, 17, generator=g, dtype=torch.float64)).clamp(0, 1)
-    # float64: separable vs direct window sums differ by rounding only.
-    assert abs(float(ssim(a, b)) - float(ssim_slow(a, b))) < 1e-10
+def _pair(shape, seed=0, noise=0.1, dtype=torch.float64):
+    g = torch.Generator().manual_seed(seed)
+    a = torch.rand(*shape, generator=g, dtype=torch.float64)
+    b = (a + noise * torch.randn(*shape, generator=g, dtype=torch.float64)).clamp(0, 1)
+    return a.to(dtype), b.to(dtype)
 
 
-def test_ssim_identity_and_gradient():
-    a = torch.rand(3, 20, 20, requires_grad=True)
-    assert abs(ssim(a.detach(), a.detach()).item() - 1.0) < 1e-5  # float32 rounding
-    ssim(a, torch.rand(3, 20, 20)).backward()
-    assert torch.isfinite(a.grad).all() and a.grad.abs().sum() > 0
+@pytest.mark.parametrize("shape", [(3, 13, 17), (3, 6, 4), (1, 12, 12)])  # odd sizes, smaller than the window
+def test_ssim_matches_reference(shape):
+    a, b = _pair(shape)
+    ref = ssim_reference(a, b)
+    # float64: separable filtering vs explicit window sums differ by summation order only.
+    assert abs(float(ssim(a, b)) - ref) < 1e-12
+    # float32 inputs: the SSIM map's rounding (variances from E[x^2] - mu^2) averages out far below 1e-6.
+    assert abs(float(ssim(a.float(), b.float())) - ref) < 1e-6
 
 
-def test_psnr_known_value():
+def test_ssim_batch_is_mean_of_images():
+    a, b = _pair((2, 3, 9, 10), seed=1)
+    expected = (ssim(a[0], b[0]) + ssim(a[1], b[1])) / 2
+    torch.testing.assert_close(ssim(a, b), expected, rtol=0, atol=1e-14)  # float64 rounding
+
+
+def test_ssim_identity_and_symmetry():
+    a, b = _pair((3, 20, 20), seed=2, dtype=torch.float32)
+    assert abs(ssim(a, a).item() - 1.0) < 1e-6  # float32 rounding of (x + C) / (x + C)
+    assert abs(ssim(a, b).item() - ssim(b, a).item()) < 1e-6  # float32; the formula is symmetric
+    assert ssim(a, b).item() < 0.99  # noise of 0.1 must lower SSIM visibly
+
+
+def test_ssim_gradient_matches_finite_differences():
+    a, b = _pair((2, 6, 7), seed=3)
+    a.requires_grad_(True)
+    assert torch.autograd.gradcheck(lambda x: ssim(x, b), (a,))  # float64, default gradcheck tolerances
+
+
+def test_ssim_rejects_mismatched_shapes():
+    with pytest.raises(AssertionError, match="shapes differ"):
+        ssim(torch.zeros(3, 4, 4), torch.zeros(3, 4, 5))
+
+
+def test_psnr_closed_forms():
     a = torch.zeros(3, 4, 4)
-    b = torch.full((3, 4, 4), 0.1)
-    assert abs(float(psnr(a, b)) - 20.0) < 1e-4  # MSE 0.01 -> 20 dB
+    assert abs(psnr(a, torch.full((3, 4, 4), 0.1)).item() - 20.0) < 1e-4  # MSE 0.01 -> 20 dB; float32 rounding
+    # One pixel in one channel off by 1: MSE = 1 / 48 -> 10 log10(48).
+    b = a.clone()
+    b[1, 2, 3] = 1.0
+    assert abs(psnr(a, b).item() - 10 * math.log10(48)) < 1e-4  # float32 rounding
+    assert psnr(a, a).item() == math.inf  # MSE 0
+
+
+def test_psnr_batched_is_per_image():
+    a = torch.zeros(2, 3, 4, 4, dtype=torch.float64)
+    b = torch.stack([torch.full((3, 4, 4), 0.1), torch.full((3, 4, 4), 0.01)]).double()
+    torch.testing.assert_close(psnr(a, b), torch.tensor([20.0, 40.0], dtype=torch.float64))  # float64 defaults
+
+
+def test_l1_closed_form():
+    a = torch.zeros(2, 3, 3)
+    b = torch.arange(18, dtype=torch.float32).reshape(2, 3, 3)
+    assert l1_loss(a, b).item() == 8.5  # mean of 0..17, exact in float32

@@ -1,4 +1,8 @@
-"""Real spherical harmonics up to degree 3, with the constants and sign conventions of the original 3DGS."""
+"""Real spherical harmonics up to degree 3, with the constants and sign conventions of the original 3DGS.
+
+Basis k = l^2 + l + m (m = -l..l) is the real SH Y_lm with the Condon-Shortley phase, written as polynomials in the
+unit direction (x, y, z); e.g. Y_1,-1 = -C1 y, Y_1,0 = C1 z, Y_1,1 = -C1 x. Colour = max(SH(dir) + 0.5, 0).
+"""
 from __future__ import annotations
 
 import torch
@@ -25,7 +29,9 @@ def eval_sh(sh_coeffs: torch.Tensor, dirs: torch.Tensor, degree: int) -> torch.T
         the raw SH sum (no +0.5 offset). [N, D]
     """
     assert 0 <= degree <= 3, f"SH degree must be in 0..3, got {degree}"
-    assert sh_coeffs.shape[1] >= num_sh_bases(degree), f"need {num_sh_bases(degree)} SH bases, got {sh_coeffs.shape}"
+    assert sh_coeffs.ndim == 3 and sh_coeffs.shape[1] >= num_sh_bases(degree), \
+        f"sh_coeffs must be [N,K,D] with K >= {num_sh_bases(degree)}, got {tuple(sh_coeffs.shape)}"
+    assert dirs.shape == (sh_coeffs.shape[0], 3), f"dirs must be [N,3], got {tuple(dirs.shape)}"
     result = C0 * sh_coeffs[:, 0]
     if degree == 0:
         return result
@@ -48,15 +54,21 @@ def eval_sh(sh_coeffs: torch.Tensor, dirs: torch.Tensor, degree: int) -> torch.T
 
 
 def sh_to_colors(sh_coeffs: torch.Tensor, means: torch.Tensor, camera_center: torch.Tensor, degree: int) -> torch.Tensor:
-    """View-dependent colour max(SH(mean - camera centre) + 0.5, 0). [N, D]"""
+    """View-dependent colour max(SH(mean - camera centre) + 0.5, 0).
+
+    Args:
+        sh_coeffs: [N, K, D]; means: world-space centres [N, 3]; camera_center: [3].
+    Returns:
+        colours. [N, D]
+    """
     return torch.clamp_min(eval_sh(sh_coeffs, means - camera_center, degree) + 0.5, 0.0)
 
 
 def rgb_to_sh(rgb: torch.Tensor) -> torch.Tensor:
-    """DC coefficient that reproduces colour `rgb` (before the +0.5 offset)."""
+    """DC coefficient whose degree-0 colour C0 sh + 0.5 equals `rgb`. [..., D] -> [..., D]"""
     return (rgb - 0.5) / C0
 
 
 def sh_to_rgb(sh_dc: torch.Tensor) -> torch.Tensor:
-    """Inverse of `rgb_to_sh`."""
+    """Degree-0 colour C0 sh_dc + 0.5 (before the clamp at 0); inverse of `rgb_to_sh`. [..., D] -> [..., D]"""
     return sh_dc * C0 + 0.5

@@ -1,13 +1,29 @@
-"""Projection of 3D Gaussians to the image plane (EWA splatting, pinhole camera). Pure tensor functions."""
+"""Projection of 3D Gaussians to the image plane (EWA splatting, pinhole camera). Pure tensor functions.
+
+Conventions: quaternions are wxyz and normalised here (raw parameters may have any norm); `viewmat` is
+world-to-camera in the OpenCV convention (x right, y down, z forward); intrinsics are (fx, fy, cx, cy) in pixels
+and pixel (x, y) has its centre at (x + 0.5, y + 0.5), so a camera-space point lands at u = fx x / z + cx.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import torch
 
+FRUSTUM_MARGIN = 0.3  # 3DGS: x/z, y/z are clamped 0.3 tan(fov/2) beyond the image edges before building J
+SIGMA_EXTENT = 3.0  # radius in standard deviations of the largest axis of the 2D covariance
+MAX_RADIUS = 1e6  # keeps the integer radius finite for nearly degenerate, huge splats
+
 
 def quat_to_rotmat(quats: torch.Tensor) -> torch.Tensor:
-    """Rotation matrices from quaternions (wxyz, normalised inside). [N,4] -> [N,3,3]"""
+    """Rotation matrices from quaternions (wxyz, normalised inside).
+
+    Args:
+        quats: rotations, any non-zero norm. [N, 4]
+    Returns:
+        R with R v = q v q*. [N, 3, 3]
+    """
+    assert quats.ndim == 2 and quats.shape[1] == 4, f"quats must be [N,4], got {tuple(quats.shape)}"
     q = quats / quats.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     w, x, y, z = q.unbind(-1)
     return torch.stack([
@@ -18,8 +34,17 @@ def quat_to_rotmat(quats: torch.Tensor) -> torch.Tensor:
 
 
 def covariance_3d(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
-    """World-space covariance R S S^T R^T. quats [N,4] (wxyz), scales [N,3] -> [N,3,3]"""
-    m = quat_to_rotmat(quats) * scales[:, None, :]  # R S
+    """World-space covariance R S S^T R^T.
+
+    Args:
+        quats: rotations, wxyz, any norm. [N, 4]
+        scales: activated (positive) standard deviations along the local axes. [N, 3]
+    Returns:
+        covariances. [N, 3, 3]
+    """
+    assert scales.ndim == 2 and scales.shape == (quats.shape[0], 3), \
+        f"scales must be [N,3] with N = {quats.shape[0]}, got {tuple(scales.shape)}"
+    m = quat_to_rotmat(quats) * scales[:, None, :]  # R S  [N, 3, 3]
     return m @ m.transpose(1, 2)
 
 
@@ -38,10 +63,14 @@ def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Te
                       dilation: float = 0.3) -> Projection:
     """Project 3D Gaussians with the local affine (EWA) approximation of the perspective map.
 
-    The 2D covariance gets a `dilation` * I low-pass term (anti-aliasing, as in 3DGS); x/z and y/z are clamped to
-    1.3x the image bounds before building the Jacobian, measured from the principal point, so off-centre principal
-    points work. Gaussians in front of the near plane, with a singular 2D covariance, or whose 3-sigma box misses the
-    image get radius 0.
+    Sigma2D = J W Sigma W^T J^T + dilation I, where W is the camera rotation and J the Jacobian of
+    (x, y, z) -> (fx x / z + cx, fy y / z + cy). As in 3DGS, x/z and y/z are clamped before building J to the
+    image edges plus a margin of 0.3 tan(fov/2) (fov from fx/width and fy/height), each edge measured from the
+    principal point so off-centre principal points work; for a centred one this is the 3DGS 1.3 tan(fov/2).
+    The clamp only shapes J: means2d are the true projections. The `dilation` term is the 3DGS anti-aliasing
+    low-pass filter. radius = ceil(3 sqrt(largest eigenvalue of Sigma2D)). Culled (radius 0): centres with
+    z <= near_plane, non-invertible or non-finite 2D covariances, and Gaussians whose radius box
+    [u - r, u + r] x [v - r, v + r] misses the image [0, width] x [0, height].
 
     Args:
         means: world-space centres. [N, 3]
@@ -49,40 +78,50 @@ def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Te
         scales: activated scales. [N, 3]
         viewmat: world-to-camera, OpenCV convention (x right, y down, z forward). [4, 4]
         intrinsics: (fx, fy, cx, cy) in pixels. [4]
+        width, height: image size in pixels.
+        near_plane: smallest camera-space depth that is rendered.
+        dilation: pixels^2 added to the diagonal of the 2D covariance.
+    Returns:
+        `Projection` (means2d [N, 2], conics [N, 3], depths [N], radii [N] int64). Differentiable w.r.t. means,
+        quats, scales (and viewmat, intrinsics); radii are not.
     """
     n = means.shape[0]
-    assert means.shape == (n, 3) and quats.shape == (n, 4) and scales.shape == (n, 3), \
-        f"bad shapes means {tuple(means.shape)} quats {tuple(quats.shape)} scales {tuple(scales.shape)}"
+    assert means.ndim == 2 and means.shape[1] == 3, f"means must be [N,3], got {tuple(means.shape)}"
+    assert quats.shape == (n, 4), f"quats must be [N,4] with N = {n}, got {tuple(quats.shape)}"
+    assert scales.shape == (n, 3), f"scales must be [N,3] with N = {n}, got {tuple(scales.shape)}"
     assert viewmat.shape == (4, 4), f"viewmat must be [4,4], got {tuple(viewmat.shape)}"
+    assert intrinsics.shape == (4,), f"intrinsics must be [4] = (fx, fy, cx, cy), got {tuple(intrinsics.shape)}"
     fx, fy, cx, cy = intrinsics.to(means.dtype).unbind(-1)
     rot, trans = viewmat[:3, :3].to(means.dtype), viewmat[:3, 3].to(means.dtype)
     t = means @ rot.T + trans  # [N, 3] camera space
     z = t[:, 2]
     in_front = z > near_plane
-    z_safe = torch.where(in_front, z, torch.ones_like(z))
-    lim_x_pos, lim_x_neg = 1.3 * (width - cx) / fx, 1.3 * cx / fx
-    lim_y_pos, lim_y_neg = 1.3 * (height - cy) / fy, 1.3 * cy / fy
-    tx = z_safe * torch.minimum(torch.maximum(t[:, 0] / z_safe, -lim_x_neg), lim_x_pos)
+    z_safe = torch.where(in_front, z, torch.ones_like(z))  # keeps culled rows finite (and their gradients 0)
+
+    margin_x, margin_y = FRUSTUM_MARGIN * width / (2 * fx), FRUSTUM_MARGIN * height / (2 * fy)
+    lim_x_pos, lim_x_neg = (width - cx) / fx + margin_x, cx / fx + margin_x
+    lim_y_pos, lim_y_neg = (height - cy) / fy + margin_y, cy / fy + margin_y
+    tx = z_safe * torch.minimum(torch.maximum(t[:, 0] / z_safe, -lim_x_neg), lim_x_pos)  # [N]
     ty = z_safe * torch.minimum(torch.maximum(t[:, 1] / z_safe, -lim_y_neg), lim_y_pos)
     zeros = torch.zeros_like(z_safe)
     jac = torch.stack([fx / z_safe, zeros, -fx * tx / z_safe**2,
-                       zeros, fy / z_safe, -fy * ty / z_safe**2], dim=-1).reshape(n, 2, 3)
+                       zeros, fy / z_safe, -fy * ty / z_safe**2], dim=-1).reshape(n, 2, 3)  # [N, 2, 3]
     cov_cam = rot @ covariance_3d(quats, scales) @ rot.T  # [N, 3, 3]
     cov2d = jac @ cov_cam @ jac.transpose(1, 2)  # [N, 2, 2]
     a = cov2d[:, 0, 0] + dilation
     b = cov2d[:, 0, 1]
     c = cov2d[:, 1, 1] + dilation
     det = a * c - b * b
-    valid = in_front & (det > 0) & torch.isfinite(det) & torch.isfinite(t).all(dim=-1)  # non-finite: culled
+    valid = in_front & (det > 0) & torch.isfinite(det) & torch.isfinite(t).all(dim=-1)
     det_safe = torch.where(valid, det, torch.ones_like(det))
-    conics = torch.stack([c / det_safe, -b / det_safe, a / det_safe], dim=-1)
-    means2d = torch.stack([fx * t[:, 0] / z_safe + cx, fy * t[:, 1] / z_safe + cy], dim=-1)
+    conics = torch.stack([c / det_safe, -b / det_safe, a / det_safe], dim=-1)  # [N, 3]
+    means2d = torch.stack([fx * t[:, 0] / z_safe + cx, fy * t[:, 1] / z_safe + cy], dim=-1)  # [N, 2]
     with torch.no_grad():
         mid = 0.5 * (a + c)
-        lam_max = mid + torch.sqrt(torch.clamp_min(mid * mid - det_safe, 0.1))
-        radii = torch.ceil(3.0 * torch.sqrt(lam_max)).clamp_max(1e6)
+        lam_max = mid + torch.sqrt(torch.clamp_min(mid * mid - det_safe, 0.0))  # largest eigenvalue of Sigma2D
+        radii = torch.ceil(SIGMA_EXTENT * torch.sqrt(lam_max)).clamp_max(MAX_RADIUS)
         radii = torch.where(torch.isfinite(radii), radii, torch.zeros_like(radii)).to(torch.int64)
-        mx, my = means2d[:, 0], means2d[:, 1]
-        on_screen = (mx + radii > 0) & (mx - radii < width) & (my + radii > 0) & (my - radii < height)
+        u, v, r = means2d[:, 0], means2d[:, 1], radii.to(means2d.dtype)
+        on_screen = (u + r > 0) & (u - r < width) & (v + r > 0) & (v - r < height)
         radii = torch.where(valid & on_screen, radii, torch.zeros_like(radii))
     return Projection(means2d=means2d, conics=conics, depths=z, radii=radii)

@@ -1,8 +1,16 @@
 """Pure-PyTorch differentiable Gaussian rasterizer (CPU first, runs unchanged on CUDA).
 
-Shape letters used throughout: N Gaussians, C cameras, H/W image height/width, K SH bases ((degree+1)^2),
-D colour channels, P parameters per Gaussian, A 2D attributes per Gaussian (6 + D), V candidate views,
-M (pixel, Gaussian) pairs, T tiles.
+Shape letters used throughout:
+    N  Gaussians                      C  cameras
+    H  image height (pixels)          W  image width (pixels)
+    K  SH bases, (degree + 1)^2       D  colour channels
+    P  parameters per Gaussian        A  2D attributes per Gaussian (mean x, y, conic a, b, c, opacity,
+    V  candidate views                   colour: 6 + D, = 9 for RGB)
+    M  (pixel, Gaussian) pairs        T  tiles
+
+Conventions: world-to-camera `viewmat [4, 4]` in the OpenCV convention (x right, y down, z forward); intrinsics
+(fx, fy, cx, cy) in pixels; pixel (x, y) has its centre at (x + 0.5, y + 0.5); quaternions wxyz, normalised
+inside the projection; conics (a, b, c) = [[a, b], [b, c]], the inverse 2D covariance.
 """
 from gaussian_renderer.api import RasterOutput, projection_jacobian, rasterization
 from gaussian_renderer.projection import Projection, project_gaussians

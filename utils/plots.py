@@ -22,6 +22,25 @@ def _per_step(runs, kind: str = "conservative") -> int | None:
     return math.ceil(sum(counts) / len(counts)) if counts else None
 
 
+def _label_axes(ax, xlabel: str, ylabel: str, title: str, legend_size: int) -> None:
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=legend_size)
+
+
+def _line_plot(series: dict[str, dict], path: Path, figsize: tuple[float, float], xlabel: str, ylabel: str,
+               title: str, legend_size: int) -> Path:
+    """One line with markers per label of `series` ({label: {x: y}}), labels sorted, x ascending."""
+    fig, ax = plt.subplots(figsize=figsize)
+    for label, pts in sorted(series.items()):
+        xs = sorted(pts)
+        ax.plot(xs, [pts[x] for x in xs], marker="o", label=label)
+    _label_axes(ax, xlabel, ylabel, title, legend_size)
+    return _save(fig, path)
+
+
 def _save(fig, path: Path) -> Path:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -42,16 +61,8 @@ def psnr_vs_views(runs, path: Path) -> Path | None:
                 curves[f"{r.setup}: {r.setting}"][views].append(float(value))
     if not curves:
         return None
-    fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    for label, pts in sorted(curves.items()):
-        xs = sorted(pts)
-        ax.plot(xs, [mean(pts[x]) for x in xs], marker="o", label=label)
-    ax.set_xlabel("training views")
-    ax.set_ylabel("test PSNR (dB)")
-    ax.set_title("Test PSNR during acquisition")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    return _save(fig, path)
+    means = {label: {views: mean(values) for views, values in pts.items()} for label, pts in curves.items()}
+    return _line_plot(means, path, (6.5, 4.2), "training views", "test PSNR (dB)", "Test PSNR during acquisition", 7)
 
 
 def oracles_vs_k(runs, path: Path) -> Path | None:
@@ -64,16 +75,7 @@ def oracles_vs_k(runs, path: Path) -> Path | None:
     series = {label: pts for label, pts in series.items() if len(pts) > 1}
     if not series:
         return None
-    fig, ax = plt.subplots(figsize=(5, 3.8))
-    for label, pts in sorted(series.items()):
-        ks = sorted(pts)
-        ax.plot(ks, [pts[k] for k in ks], marker="o", label=label)
-    ax.set_xlabel("views per step K")
-    ax.set_ylabel("oracle evaluations per step")
-    ax.set_title("Oracle cost vs K")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    return _save(fig, path)
+    return _line_plot(series, path, (5, 3.8), "views per step K", "oracle evaluations per step", "Oracle cost vs K", 8)
 
 
 def eps_tradeoff(runs, path: Path) -> Path | None:
@@ -90,11 +92,7 @@ def eps_tradeoff(runs, path: Path) -> Path | None:
         x, y = _per_step(group), mean(float(r.results["PSNR"]) for r in group)
         ax.scatter([x], [y], marker="o" if method == "lite_gs" else "s", label=f"{method} K={k} eps={eps:g}")
         ax.annotate(f"{eps:g}", (x, y), textcoords="offset points", xytext=(4, 4), fontsize=8)
-    ax.set_xlabel("oracle evaluations per step (conservative)")
-    ax.set_ylabel("test PSNR (dB)")
-    ax.set_title("eps trade-off")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    _label_axes(ax, "oracle evaluations per step (conservative)", "test PSNR (dB)", "eps trade-off", 7)
     return _save(fig, path)
 
 

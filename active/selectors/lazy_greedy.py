@@ -1,9 +1,11 @@
-"""Lazy greedy step shared by lite_gs and ssg: a max-priority queue over cached (upper-bound) gains."""
+"""Lazy greedy shared by lite_gs and ssg: a max-priority queue over cached (upper-bound) gains, and the pick loop."""
 from __future__ import annotations
 
 import heapq
+import math
+from typing import Callable
 
-from active.base import GainOracle
+from active.base import GainOracle, OracleCalls, Selection
 
 
 def lazy_greedy_pick(members: list[int], cached: dict[int, float], oracle: GainOracle) -> tuple[int, float, int]:
@@ -30,3 +32,25 @@ def lazy_greedy_pick(members: list[int], cached: dict[int, float], oracle: GainO
         if not heap or gain >= -heap[0][0]:
             return view, gain, evaluations
         heapq.heappush(heap, (-gain, view))
+
+
+def lazy_greedy_select(pool: list[int], k: int, oracle: GainOracle,
+                       members_for_pick: Callable[[int, list[int]], list[int]]) -> Selection:
+    """K lazy greedy picks; pick j chooses among `members_for_pick(j, pool)` (a subset of what is left of `pool`).
+
+    Cached gains start at +inf for the whole pool and persist across picks; each winner is committed to the oracle
+    and removed from the pool. Conservative count: the members offered at every pick, summed.
+    """
+    pool = list(pool)
+    cached = {v: math.inf for v in pool}
+    ids, gains, conservative, evaluated = [], [], 0, 0
+    for j in range(k):
+        members = members_for_pick(j, pool)
+        conservative += len(members)
+        view, gain, calls = lazy_greedy_pick(members, cached, oracle)
+        evaluated += calls
+        oracle.commit(view)
+        pool.remove(view)
+        ids.append(view)
+        gains.append(gain)
+    return Selection(ids, gains, OracleCalls(conservative, evaluated))

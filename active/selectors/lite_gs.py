@@ -8,15 +8,14 @@ step whatever K; evaluated: the gains actually computed.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import torch
 
-from active.base import OracleCalls, Selection, SelectionContext, Selector, check_eps, check_k
+from active.base import Selection, SelectionContext, Selector, check_eps, check_k
 from active.oracle_counts import subset_size
 from active.registry import register_selector
-from active.selectors.lazy_greedy import lazy_greedy_pick
+from active.selectors.lazy_greedy import lazy_greedy_select
 
 
 @dataclass(frozen=True)
@@ -39,17 +38,9 @@ class LiteGSSelector(Selector):
         remaining = sorted(ctx.candidate_ids)
         m = len(remaining)
         k = min(k, m)
-        cached = {v: math.inf for v in remaining}
-        ids, gains, conservative, evaluated = [], [], 0, 0
-        for j in range(k):
-            p = subset_size(m - j, k, self.config.eps)
-            draw = torch.randperm(len(remaining), generator=ctx.generator)[:p].tolist()
-            subset = [remaining[i] for i in draw]
-            conservative += p
-            view, gain, calls = lazy_greedy_pick(subset, cached, ctx.oracle)
-            evaluated += calls
-            ctx.oracle.commit(view)
-            remaining.remove(view)
-            ids.append(view)
-            gains.append(gain)
-        return Selection(ids, gains, OracleCalls(conservative, evaluated))
+
+        def fresh_subset(j: int, pool: list[int]) -> list[int]:  # p_j members drawn from the not-yet-chosen
+            draw = torch.randperm(len(pool), generator=ctx.generator)[:subset_size(m - j, k, self.config.eps)]
+            return [pool[i] for i in draw.tolist()]
+
+        return lazy_greedy_select(remaining, k, ctx.oracle, fresh_subset)

@@ -6,15 +6,14 @@ it, with gains cached across the picks. Conservative count: sum_{j < K} (p - j).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import torch
 
-from active.base import OracleCalls, Selection, SelectionContext, Selector, check_eps, check_k
+from active.base import Selection, SelectionContext, Selector, check_eps, check_k
 from active.oracle_counts import ssg_subset_size
 from active.registry import register_selector
-from active.selectors.lazy_greedy import lazy_greedy_pick
+from active.selectors.lazy_greedy import lazy_greedy_select
 
 
 @dataclass(frozen=True)
@@ -39,14 +38,4 @@ class SSGSelector(Selector):
         k = min(k, m)
         p = ssg_subset_size(m, k, self.config.eps) if k else 0  # no candidates: nothing to draw
         subset = [candidates[i] for i in torch.randperm(m, generator=ctx.generator)[:p].tolist()]
-        cached = {v: math.inf for v in subset}
-        ids, gains, conservative, evaluated = [], [], 0, 0
-        for j in range(k):
-            conservative += p - j
-            view, gain, calls = lazy_greedy_pick(subset, cached, ctx.oracle)
-            evaluated += calls
-            ctx.oracle.commit(view)
-            subset.remove(view)
-            ids.append(view)
-            gains.append(gain)
-        return Selection(ids, gains, OracleCalls(conservative, evaluated))
+        return lazy_greedy_select(subset, k, ctx.oracle, lambda j, pool: pool)  # p - j members at pick j

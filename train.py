@@ -35,8 +35,7 @@ from scene.scene import Scene
 from utils.checkpoint import RunDirectory
 from utils.errors import UserError, run_cli
 from utils.io import write_json
-from utils.losses import l1_loss, ssim
-from utils.image import psnr
+from utils.losses import l1_loss, psnr, ssim
 from utils.seeding import rng_state, seed_everything, set_rng_state
 
 log = logging.getLogger("train")

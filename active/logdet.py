@@ -113,12 +113,16 @@ class BlockInformation:
 
     def add(self, blocks: torch.Tensor) -> None:
         """Commit a view: A <- A + H_v+, with H_v+ = L max(W, 0) L^T the PSD part of H_v in the metric of A
-        (= H_v when H_v is PSD), so logdet(A) grows by exactly `gain(blocks)`.
+        (= H_v when H_v is PSD), so logdet(A) grows by exactly `gain(blocks)`."""
+        self.add_whitened(self.whiten(blocks))
+
+    def add_whitened(self, w: torch.Tensor) -> None:
+        """`add` for a view already whitened by the current factor, W = L^-1 H_v L^-T [N, P, P].
 
         The factor updates as L <- L C with C C^T = I + max(W, 0): C = R^T from a QR of
         (V diag(1 + max(lambda, 0))^1/2)^T (backward stable at any condition number), so a commit never fails.
         """
-        evals, evecs = torch.linalg.eigh(self.whiten(blocks))  # [N, P], [N, P, P]
+        evals, evecs = torch.linalg.eigh(w)  # [N, P], [N, P, P]
         root = evecs * torch.sqrt(1.0 + evals.clamp_min(0.0))[:, None, :]  # M, M M^T = I + W+  [N, P, P]
         r = torch.linalg.qr(root.transpose(-1, -2), mode="r").R  # M^T = Q R  ->  M M^T = R^T R  [N, P, P]
         r = r * torch.sign(torch.diagonal(r, dim1=-2, dim2=-1))[..., None]  # positive diagonal (rows scaled +-1)
@@ -136,21 +140,35 @@ class BlockInformation:
 
 class BlockGainOracle:
     """The counted `GainOracle` the selectors call; `view_blocks(view_id)` supplies H_v [N, P, P] (it may cache
-    the blocks or recompute them on every call: the cached and streaming modes of `active.fisher`)."""
+    the blocks or recompute them on every call: the cached and streaming modes of `active.fisher`).
+
+    It remembers the whitened blocks of the best view evaluated since the last commit: every selector commits the
+    best gain of its pick, so a commit costs no second `view_blocks` call (in streaming mode, no Fisher recompute)
+    and no second whitening. Memory: one view's blocks.
+    """
 
     def __init__(self, information: BlockInformation, view_blocks: Callable[[int], torch.Tensor]):
         self.information = information
         self.view_blocks = view_blocks
         self.evaluated = 0  # oracle evaluations since construction or `reset_counts`
+        self._best: tuple[int, float, torch.Tensor] | None = None  # (view, gain, W) since the last commit
 
     def gain(self, view_id: int) -> float:
         """rho(v | S): one oracle evaluation."""
         self.evaluated += 1
-        return self.information.gain(self.view_blocks(view_id))
+        w = self.information.whiten(self.view_blocks(view_id))
+        gain = float(logdet_identity_plus(w).sum())
+        if self._best is None or gain > self._best[1]:
+            self._best = (view_id, gain, w)
+        return gain
 
     def commit(self, view_id: int) -> None:
         """S <- S + {v}: adds H_v to the information (not an oracle evaluation)."""
-        self.information.add(self.view_blocks(view_id))
+        if self._best is not None and self._best[0] == view_id:
+            self.information.add_whitened(self._best[2])
+        else:
+            self.information.add(self.view_blocks(view_id))
+        self._best = None
 
     def reset_counts(self) -> None:
         self.evaluated = 0

@@ -2,12 +2,16 @@
 
     python benchmarks/bench_selection.py --model output/quickstart --mode cached
     python benchmarks/bench_selection.py --model output/quickstart --mode streaming --ks 3
+    python benchmarks/bench_selection.py --model output/quickstart --memory_table --ks 3
+
 
 Uses a trained model directory (default: the quickstart's) and its dataset; the seed views are chosen by
 farthest-point sampling (2 of the pool, so M = 98 candidates on the built-in scene). Modes:
   cached     every candidate's blocks are computed once (timed apart) and a gain is a batched log-det update;
   streaming  nothing is kept: every oracle recomputes that view's blocks (the memory-lean mode).
-Peak resident memory of the process is printed at the end; run the two modes as separate processes to compare.
+Peak resident memory of the process is printed at the end. `--memory_table` runs pop_gs (first K of --ks) in
+both modes, each in its own process, for a growing number of candidates (--pool_sizes, the last = all) and prints
+the peak resident memory of each: cached grows with M, streaming stays flat.
 """
 from __future__ import annotations
 
@@ -16,6 +20,7 @@ import json
 import platform
 import resource
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -53,7 +58,17 @@ def main() -> None:
     parser.add_argument("--ks", type=int, nargs="+", default=[3, 4, 6])
     parser.add_argument("--eps", type=float, nargs="+", default=[0.1, 0.3, 0.6])
     parser.add_argument("--num_init_views", type=int, default=2)
+    parser.add_argument("--methods", nargs="+", choices=("pop_gs", "lite_gs"), default=["pop_gs", "lite_gs"])
+    parser.add_argument("--num_candidates", type=int, default=0,
+                        help="use only the first N candidates (0 = all); for peak-memory scaling")
+    parser.add_argument("--memory_table", action="store_true",
+                        help="peak memory of pop_gs, cached vs streaming, over --pool_sizes (one process each)")
+    parser.add_argument("--pool_sizes", type=int, nargs="+", default=[24, 48, 0], help="0 = all candidates")
+    parser.add_argument("--json", type=Path, default=None, help="where to write the results (default: results/)")
     args = parser.parse_args()
+    if args.memory_table:
+        memory_table(args)
+        return
 
     model_path = Path(args.model)
     model_cfg, pipeline_cfg = load_model_config(model_path)
@@ -66,6 +81,8 @@ def main() -> None:
     settings = RasterSettings(tile_size=pipeline_cfg.tile_size)
     seeds = farthest_point_views(torch.stack([c.camera_center for c in cams]), args.num_init_views)
     candidates = [v for v in range(len(cams)) if v not in seeds]
+    if args.num_candidates > 0:
+        candidates = candidates[:args.num_candidates]
 
     def train_step(v):
         out = render(cams[v], gaussians, bg, settings)
@@ -98,7 +115,8 @@ def main() -> None:
         print(f"cache: {len(cache)} views, {size_mb:.0f} MB, built in {t_cache:.1f} s")
 
     rows = []
-    configs = [("pop_gs", None)] + [("lite_gs", e) for e in args.eps]
+    configs = ([("pop_gs", None)] if "pop_gs" in args.methods else []) \
+        + ([("lite_gs", e) for e in args.eps] if "lite_gs" in args.methods else [])
     for k in args.ks:
         for method, eps in configs:
             computed = set()
@@ -118,19 +136,51 @@ def main() -> None:
     print(f"{'K':>2} {'method':8} {'eps':>4} {'conserv.':>8} {'evaluated':>9} {'views':>5} {'select s':>9} "
           f"{'time/pop':>8} {'evals/pop':>9}")
     for r in rows:
-        pop = next(p for p in rows if p["K"] == r["K"] and p["method"] == "pop_gs")
+        pop = next((p for p in rows if p["K"] == r["K"] and p["method"] == "pop_gs"), None)
+        ratios = (f"{r['select_s'] / pop['select_s']:8.3f} {r['evaluated'] / pop['evaluated']:9.3f}" if pop
+                  else f"{'-':>8} {'-':>9}")
         print(f"{r['K']:2d} {r['method']:8} {'' if r['eps'] is None else r['eps']:>4} {r['conservative']:8d} "
-              f"{r['evaluated']:9d} {r['views_computed']:5d} {r['select_s']:9.2f} "
-              f"{r['select_s'] / pop['select_s']:8.3f} {r['evaluated'] / pop['evaluated']:9.3f}")
+              f"{r['evaluated']:9d} {r['views_computed']:5d} {r['select_s']:9.2f} {ratios}")
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"\npeak resident memory of this process: {peak_mb:.0f} MB")
-    out = Path(__file__).parent / "results" / f"selection_{args.mode}_{time.strftime('%Y%m%d_%H%M%S')}.json"
-    out.parent.mkdir(exist_ok=True)
+    out = args.json or (Path(__file__).parent / "results"
+                        / f"selection_{args.mode}_{time.strftime('%Y%m%d_%H%M%S')}.json")
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"machine": platform.platform(), "torch": torch.__version__, "mode": args.mode,
-                               "gaussians": gaussians.num_gaussians, "train_step_s": t_step,
+                               "gaussians": gaussians.num_gaussians, "candidates": len(candidates),
+                               "cache_mb": sum(b.numel() * b.element_size() for b in cache.values()) / 2**20,
+                               "train_step_s": t_step,
                                "fisher_view_s": t_fisher, "gain_s": t_gain, "cache_build_s": t_cache,
                                "peak_rss_mb": peak_mb, "rows": rows}, indent=2))
     print(f"wrote {out}")
+
+
+def memory_table(args: argparse.Namespace) -> None:
+    """Peak RSS of pop_gs in cached and streaming mode over growing pools, one child process per cell."""
+    k = args.ks[0]
+    results_dir = Path(__file__).parent / "results"
+    results_dir.mkdir(exist_ok=True)
+    stamp = time.strftime("%Y%m%d_%H%M%S")
+    print(f"pop_gs, K = {k}: peak resident memory of one process per cell")
+    print(f"{'M':>4} {'mode':9} {'cache MB':>8} {'peak RSS MB':>11} {'select s':>9}")
+    table = []
+    for pool in args.pool_sizes:
+        for mode in ("cached", "streaming"):
+            out = results_dir / f"memory_{stamp}_{mode}_{pool}.json"
+            cmd = [sys.executable, __file__, "--model", str(args.model), "--mode", mode, "--ks", str(k),
+                   "--methods", "pop_gs", "--num_init_views", str(args.num_init_views),
+                   "--num_candidates", str(pool), "--json", str(out)]
+            subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+            res = json.loads(out.read_text())
+            row = {"M": res["candidates"], "mode": mode, "cache_mb": res["cache_mb"], "peak_rss_mb": res["peak_rss_mb"],
+                   "select_s": res["rows"][0]["select_s"]}
+            table.append(row)
+            print(f"{row['M']:4d} {mode:9} {row['cache_mb']:8.0f} {row['peak_rss_mb']:11.0f} {row['select_s']:9.1f}",
+                  flush=True)
+    summary = results_dir / f"memory_{stamp}.json"
+    summary.write_text(json.dumps({"machine": platform.platform(), "model": str(args.model), "K": k, "rows": table},
+                                  indent=2))
+    print(f"wrote {summary}")
 
 
 if __name__ == "__main__":

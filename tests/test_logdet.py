@@ -145,8 +145,14 @@ def test_oracle_counts_gains_not_commits_and_streams_blocks():
     oracle = BlockGainOracle(info, view_blocks)
     expected = info.gain(views[1])
     assert oracle.gain(1) == expected and oracle.gain(2) > 0 and oracle.evaluated == 2
-    oracle.commit(1)
-    assert oracle.evaluated == 2 and calls == [1, 2, 1]
+    best = 1 if expected > info.gain(views[2]) else 2
+    reference = BlockInformation(prior)
+    reference.add(views[best])
+    oracle.commit(best)  # the best view since the last commit: its whitened blocks are reused, not recomputed
+    assert oracle.evaluated == 2 and calls == [1, 2]
+    torch.testing.assert_close(info.chol, reference.chol, rtol=0, atol=0)
+    oracle.commit(0)  # never evaluated: its blocks are requested
+    assert calls == [1, 2, 0]
     assert oracle.gain(1) < expected  # the committed information is used: diminishing returns
     oracle.reset_counts()
     assert oracle.evaluated == 0

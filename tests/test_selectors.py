@@ -166,3 +166,24 @@ def test_registry_refuses_duplicates_unknown_names_and_options():
             register_selector("_test_dummy")(Dummy)
     finally:
         registry._SELECTORS.pop("_test_dummy", None)
+
+
+@pytest.mark.parametrize("method,options", [("pop_gs", {}), ("lite_gs", {"eps": 0.1}), ("ssg", {"eps": 0.1})])
+def test_streaming_commits_cost_no_fisher_recompute(method, options):
+    """Each pick commits its best fresh gain, whose whitened blocks the oracle kept: in streaming mode the Fisher
+    blocks are computed exactly once per evaluated oracle, and the result equals committing recomputed blocks."""
+    blocks = problem(m=20, n=6, p=3, seed=4)
+    calls = []
+
+    def streaming(v):
+        calls.append(v)
+        return blocks[v + 1]
+
+    oracle = BlockGainOracle(BlockInformation(blocks[0]), streaming)
+    ctx = SelectionContext(list(range(20)), oracle, torch.Generator().manual_seed(0), stage=0)
+    selection = build_selector(method, **options).select(ctx, 4)
+    assert len(calls) == selection.oracle_calls.evaluated
+    reference = BlockInformation(blocks[0])
+    for v in selection.ids:
+        reference.add(blocks[v + 1])
+    torch.testing.assert_close(oracle.information.chol, reference.chol, rtol=1e-12, atol=1e-12)

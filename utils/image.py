@@ -1,4 +1,4 @@
-"""Image IO (8-bit PNG <-> float tensors in [0, 1]) and PSNR."""
+"""Image IO: 8-bit PNG <-> float tensors in [0, 1] (PSNR lives in utils.losses)."""
 from __future__ import annotations
 
 import os
@@ -21,9 +21,3 @@ def save_image(image: torch.Tensor, path: str | os.PathLike) -> None:
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     arr = (image.detach().float().clamp(0, 1).permute(1, 2, 0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
     Image.fromarray(arr).save(path)
-
-
-def psnr(img1: torch.Tensor, img2: torch.Tensor) -> torch.Tensor:
-    """PSNR in dB of two images in [0, 1] of the same shape (MSE over all pixels and channels). Scalar tensor."""
-    mse = torch.mean((img1 - img2) ** 2)
-    return 10.0 * torch.log10(1.0 / mse.clamp_min(1e-20))

@@ -3,6 +3,7 @@
     python benchmarks/bench_selection.py --model output/quickstart --mode cached
     python benchmarks/bench_selection.py --model output/quickstart --mode streaming --ks 3
     python benchmarks/bench_selection.py --model output/quickstart --memory_table --ks 3
+    python benchmarks/bench_selection.py --report benchmarks/results/selection_streaming_<date>.json
 
 
 Uses a trained model directory (default: the quickstart's) and its dataset; the seed views are chosen by
@@ -65,7 +66,11 @@ def main() -> None:
                         help="peak memory of pop_gs, cached vs streaming, over --pool_sizes (one process each)")
     parser.add_argument("--pool_sizes", type=int, nargs="+", default=[24, 48, 0], help="0 = all candidates")
     parser.add_argument("--json", type=Path, default=None, help="where to write the results (default: results/)")
+    parser.add_argument("--report", type=Path, default=None, help="only print the table of a results JSON")
     args = parser.parse_args()
+    if args.report:
+        report(args.report)
+        return
     if args.memory_table:
         memory_table(args)
         return
@@ -133,14 +138,7 @@ def main() -> None:
                          "evaluated": sel.oracle_calls.evaluated, "views_computed": len(computed),
                          "select_s": time.perf_counter() - t0})
     print(f"\n{args.mode} mode{' (cache build excluded, see above)' if cache else ''}")
-    print(f"{'K':>2} {'method':8} {'eps':>4} {'conserv.':>8} {'evaluated':>9} {'views':>5} {'select s':>9} "
-          f"{'time/pop':>8} {'evals/pop':>9}")
-    for r in rows:
-        pop = next((p for p in rows if p["K"] == r["K"] and p["method"] == "pop_gs"), None)
-        ratios = (f"{r['select_s'] / pop['select_s']:8.3f} {r['evaluated'] / pop['evaluated']:9.3f}" if pop
-                  else f"{'-':>8} {'-':>9}")
-        print(f"{r['K']:2d} {r['method']:8} {'' if r['eps'] is None else r['eps']:>4} {r['conservative']:8d} "
-              f"{r['evaluated']:9d} {r['views_computed']:5d} {r['select_s']:9.2f} {ratios}")
+    print_rows(rows)
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"\npeak resident memory of this process: {peak_mb:.0f} MB")
     out = args.json or (Path(__file__).parent / "results"
@@ -153,6 +151,36 @@ def main() -> None:
                                "fisher_view_s": t_fisher, "gain_s": t_gain, "cache_build_s": t_cache,
                                "peak_rss_mb": peak_mb, "rows": rows}, indent=2))
     print(f"wrote {out}")
+
+
+def print_rows(rows: list[dict]) -> None:
+    """The selection table: counts, wall time, both ratios to pop_gs at the same K and the time per evaluated
+    oracle; then the time per evaluated oracle summed over all rows of each method (per-view Fisher cost varies,
+    so single cells scatter around the oracle ratio; the totals show whether overhead eats the savings)."""
+    print(f"{'K':>2} {'method':8} {'eps':>4} {'conserv.':>8} {'evaluated':>9} {'views':>5} {'select s':>9} "
+          f"{'time/pop':>8} {'evals/pop':>9} {'s/eval':>7}")
+    for r in rows:
+        pop = next((p for p in rows if p["K"] == r["K"] and p["method"] == "pop_gs"), None)
+        ratios = (f"{r['select_s'] / pop['select_s']:8.3f} {r['evaluated'] / pop['evaluated']:9.3f}" if pop
+                  else f"{'-':>8} {'-':>9}")
+        print(f"{r['K']:2d} {r['method']:8} {'' if r['eps'] is None else r['eps']:>4} {r['conservative']:8d} "
+              f"{r['evaluated']:9d} {r['views_computed']:5d} {r['select_s']:9.2f} {ratios} "
+              f"{r['select_s'] / max(1, r['evaluated']):7.3f}")
+    for method in dict.fromkeys(r["method"] for r in rows):
+        mine = [r for r in rows if r["method"] == method]
+        seconds, evals = sum(r["select_s"] for r in mine), sum(r["evaluated"] for r in mine)
+        print(f"{method}: {evals} evaluated oracles in {seconds:.1f} s over {len(mine)} rows = "
+              f"{seconds / max(1, evals):.4f} s per evaluated oracle")
+
+
+def report(path: Path) -> None:
+    """Print the table of a results JSON written earlier by this script."""
+    res = json.loads(path.read_text())
+    print(f"{path}: {res['mode']} mode, {res['gaussians']} Gaussians, {res.get('candidates', '?')} candidates, "
+          f"one step {1e3 * res['train_step_s']:.1f} ms, one view's Fisher blocks {1e3 * res['fisher_view_s']:.1f} ms "
+          f"({res['fisher_view_s'] / res['train_step_s']:.2f}x), one gain {1e3 * res['gain_s']:.1f} ms, "
+          f"peak RSS {res['peak_rss_mb']:.0f} MB")
+    print_rows(res["rows"])
 
 
 def memory_table(args: argparse.Namespace) -> None:

@@ -164,7 +164,6 @@ def test_ablation_and_rounding(fake, tmp_path):
     assert option(c, "-m").endswith("setup1/lego/lite_gs_eps0.3/seed0")
 
 
-@pytest.mark.slow
 def test_miniature_setup1_end_to_end(tiny_scene, tmp_path):
     """Setup 1 through the real CLIs on the 32 px built-in scene (14 training views), 55 iterations per run."""
     out = tmp_path / "out"

@@ -5,7 +5,6 @@
     python benchmarks/bench_selection.py --model output/quickstart --memory_table --ks 3
     python benchmarks/bench_selection.py --report benchmarks/results/selection_streaming_<date>.json
 
-
 Uses a trained model directory (default: the quickstart's) and its dataset; the seed views are chosen by
 farthest-point sampling (2 of the pool, so M = 98 candidates on the built-in scene). Modes:
   cached     every candidate's blocks are computed once (timed apart) and a gain is a batched log-det update;
@@ -111,13 +110,13 @@ def main() -> None:
           f"{1e3 * t_fisher:.1f} ms ({t_fisher / t_step:.2f}x a step) | one gain on cached blocks: "
           f"{1e3 * t_gain:.1f} ms")
 
-    cache, t_cache = {}, 0.0
+    cache, t_cache, cache_mb = {}, 0.0, 0.0
     if args.mode == "cached":
         t0 = time.perf_counter()
         cache = {v: blocks(v) for v in candidates}
         t_cache = time.perf_counter() - t0
-        size_mb = sum(b.numel() * b.element_size() for b in cache.values()) / 2**20
-        print(f"cache: {len(cache)} views, {size_mb:.0f} MB, built in {t_cache:.1f} s")
+        cache_mb = sum(b.numel() * b.element_size() for b in cache.values()) / 2**20
+        print(f"cache: {len(cache)} views, {cache_mb:.0f} MB, built in {t_cache:.1f} s")
 
     rows = []
     configs = ([("pop_gs", None)] if "pop_gs" in args.methods else []) \
@@ -146,8 +145,7 @@ def main() -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"machine": platform.platform(), "torch": torch.__version__, "mode": args.mode,
                                "gaussians": gaussians.num_gaussians, "candidates": len(candidates),
-                               "cache_mb": sum(b.numel() * b.element_size() for b in cache.values()) / 2**20,
-                               "train_step_s": t_step,
+                               "cache_mb": cache_mb, "train_step_s": t_step,
                                "fisher_view_s": t_fisher, "gain_s": t_gain, "cache_build_s": t_cache,
                                "peak_rss_mb": peak_mb, "rows": rows}, indent=2))
     print(f"wrote {out}")

@@ -25,7 +25,8 @@ class ModelConfig:
     """Where the data and the outputs are, and how the scene is loaded."""
 
     source_path: str = field(default="", metadata=_flag("-s", "dataset directory (Blender or COLMAP layout)"))
-    model_path: str = field(default="", metadata=_flag("-m", "output directory (default output/<scene name>)"))
+    model_path: str = field(default="", metadata=_flag(
+        "-m", "output directory (default output/<scene name>; output/<scene name>_<method> for an active run)"))
     images: str = field(default="images", metadata=_flag("-i", "COLMAP image folder name"))
     resolution: int = field(default=-1, metadata=_flag("-r", "1/2/4/8 = downscale factor, other >0 = target width, -1 = as is"))
     white_background: bool = field(default=False, metadata=_flag("-w", "composite RGBA on white (Blender)"))

@@ -109,7 +109,12 @@ class BlockInformation:
 
     def gain(self, blocks: torch.Tensor) -> float:
         """rho(v | S) = logdet(A + H_v) - logdet(A) for the view's blocks H_v [N, P, P] (not counted)."""
-        return float(logdet_identity_plus(self.whiten(blocks)).sum())
+        return self.gain_and_whitened(blocks)[0]
+
+    def gain_and_whitened(self, blocks: torch.Tensor) -> tuple[float, torch.Tensor]:
+        """`gain` and the whitened blocks W it came from (what `add_whitened` takes). W: [N, P, P]"""
+        w = self.whiten(blocks)
+        return float(logdet_identity_plus(w).sum()), w
 
     def add(self, blocks: torch.Tensor) -> None:
         """Commit a view: A <- A + H_v+, with H_v+ = L max(W, 0) L^T the PSD part of H_v in the metric of A
@@ -156,8 +161,7 @@ class BlockGainOracle:
     def gain(self, view_id: int) -> float:
         """rho(v | S): one oracle evaluation."""
         self.evaluated += 1
-        w = self.information.whiten(self.view_blocks(view_id))
-        gain = float(logdet_identity_plus(w).sum())
+        gain, w = self.information.gain_and_whitened(self.view_blocks(view_id))
         if self._best is None or gain > self._best[1]:
             self._best = (view_id, gain, w)
         return gain

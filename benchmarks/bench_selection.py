@@ -42,6 +42,9 @@ from scene.scene import Scene  # noqa: E402
 from utils.losses import l1_loss, ssim  # noqa: E402
 
 
+RESULTS_DIR = Path(__file__).parent / "results"
+
+
 def median_time(fn, items) -> float:
     times = []
     for item in items:
@@ -140,8 +143,7 @@ def main() -> None:
     print_rows(rows)
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"\npeak resident memory of this process: {peak_mb:.0f} MB")
-    out = args.json or (Path(__file__).parent / "results"
-                        / f"selection_{args.mode}_{time.strftime('%Y%m%d_%H%M%S')}.json")
+    out = args.json or RESULTS_DIR / f"selection_{args.mode}_{time.strftime('%Y%m%d_%H%M%S')}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"machine": platform.platform(), "torch": torch.__version__, "mode": args.mode,
                                "gaussians": gaussians.num_gaussians, "candidates": len(candidates),
@@ -184,15 +186,14 @@ def report(path: Path) -> None:
 def memory_table(args: argparse.Namespace) -> None:
     """Peak RSS of pop_gs in cached and streaming mode over growing pools, one child process per cell."""
     k = args.ks[0]
-    results_dir = Path(__file__).parent / "results"
-    results_dir.mkdir(exist_ok=True)
+    RESULTS_DIR.mkdir(exist_ok=True)
     stamp = time.strftime("%Y%m%d_%H%M%S")
     print(f"pop_gs, K = {k}: peak resident memory of one process per cell")
     print(f"{'M':>4} {'mode':9} {'cache MB':>8} {'peak RSS MB':>11} {'select s':>9}")
     table = []
     for pool in args.pool_sizes:
         for mode in ("cached", "streaming"):
-            out = results_dir / f"memory_{stamp}_{mode}_{pool}.json"
+            out = RESULTS_DIR / f"memory_{stamp}_{mode}_{pool}.json"
             cmd = [sys.executable, __file__, "--model", str(args.model), "--mode", mode, "--ks", str(k),
                    "--methods", "pop_gs", "--num_init_views", str(args.num_init_views),
                    "--num_candidates", str(pool), "--json", str(out)]
@@ -203,7 +204,7 @@ def memory_table(args: argparse.Namespace) -> None:
             table.append(row)
             print(f"{row['M']:4d} {mode:9} {row['cache_mb']:8.0f} {row['peak_rss_mb']:11.0f} {row['select_s']:9.1f}",
                   flush=True)
-    summary = results_dir / f"memory_{stamp}.json"
+    summary = RESULTS_DIR / f"memory_{stamp}.json"
     summary.write_text(json.dumps({"machine": platform.platform(), "model": str(args.model), "K": k, "rows": table},
                                   indent=2))
     print(f"wrote {summary}")

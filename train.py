@@ -28,9 +28,9 @@ from arguments import (ActiveConfig, ModelConfig, PipelineConfig, RunConfig, add
                        config_to_dict)
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
-from scene.densify import DensifyConfig, DensifyStrategy
+from training.densify import DensifyConfig, DensifyStrategy
 from scene.gaussian_model import GaussianModel
-from scene.optim import OptimConfig, PositionLRSchedule, create_optimizer
+from training.optim import OptimConfig, PositionLRSchedule, create_optimizer
 from scene.scene import Scene
 from utils.checkpoint import RunDirectory
 from utils.errors import UserError, run_cli

@@ -29,7 +29,7 @@ import torch
 
 from active.logdet import BlockGainOracle, BlockInformation
 from gaussian_renderer import RasterSettings, project_gaussians, projection_jacobian
-from gaussian_renderer.rasterize import attribute_gram
+from gaussian_renderer.fisher_partials import attribute_gram
 from gaussian_renderer.sh import sh_to_colors
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel

@@ -3,7 +3,7 @@
 Each group is a frozen dataclass with typed fields and a default; the CLI is generated from the fields
 (`add_config_args`) and read back explicitly (`config_from_args`). Resolved configs are saved as JSON.
 Optimisation and densification configs live next to the code that uses them
-(`scene.optim.OptimConfig`, `scene.densify.DensifyConfig`) and are exposed here the same way.
+(`training.optim.OptimConfig`, `training.densify.DensifyConfig`) and are exposed here the same way.
 """
 from __future__ import annotations
 

@@ -29,7 +29,8 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from gaussian_renderer.rasterize import attribute_gram, bin_gaussians, rasterize  # noqa: E402
+from gaussian_renderer.fisher_partials import attribute_gram  # noqa: E402
+from gaussian_renderer.rasterize import bin_gaussians, rasterize  # noqa: E402
 from gaussian_renderer.reference import rasterize_reference  # noqa: E402
 from gaussian_renderer.settings import RasterSettings  # noqa: E402
 

@@ -1,15 +1,14 @@
-"""The public rasterization entry point and the per-Gaussian projection Jacobian used by the Fisher oracle."""
+"""The public rasterization entry point: project, colour (SH), rasterize."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import torch
 
-from gaussian_renderer.projection import project_gaussians
+from gaussian_renderer.projection import camera_center, project_gaussians
 from gaussian_renderer.rasterize import rasterize
 from gaussian_renderer.settings import RasterSettings
 from gaussian_renderer.sh import num_sh_bases, sh_to_colors
-from utils.errors import UserError
 
 
 @dataclass
@@ -22,12 +21,6 @@ class RasterOutput:
     radii: torch.Tensor  # [N] int64, 0 = not rendered
     visible: torch.Tensor  # [N] bool
     depths: torch.Tensor  # [N]
-
-
-def camera_center(viewmat: torch.Tensor) -> torch.Tensor:
-    """World position of the camera of a world-to-camera matrix. [4,4] -> [3]"""
-    rot, trans = viewmat[:3, :3], viewmat[:3, 3]
-    return -rot.T @ trans
 
 
 def rasterization(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, opacities: torch.Tensor,
@@ -80,57 +73,3 @@ def rasterization(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor
     image, alpha = rasterize(means2d, proj.conics, opacities, colors, proj.depths, proj.radii, width, height,
                              background.to(dtype=means.dtype, device=means.device), settings)
     return RasterOutput(image, alpha, means2d, proj.radii, proj.radii > 0, proj.depths)
-
-
-PARAM_GROUPS = ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest")  # raw parameters, in order
-
-
-def projection_jacobian(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
-                        logit_opacities: torch.Tensor, sh_coeffs: torch.Tensor, sh_degree: int,
-                        viewmat: torch.Tensor, intrinsics: torch.Tensor, width: int, height: int,
-                        param_groups: tuple[str, ...] = ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
-                        ) -> torch.Tensor:
-    """Jacobian of each Gaussian's 2D attributes w.r.t. its own raw parameters.
-
-    2D attributes (A = 9): mean2d x, y, conic a, b, c, opacity, colour RGB. Raw parameters, in `param_groups`
-    order: means (3), quats (4, unnormalised), log_scales (3), logit_opacities (1), sh_dc (3), and with "sh_rest"
-    the remaining SH coefficients (3 (K-1)). Gaussians are independent, so one backward pass per attribute gives
-    that row for every Gaussian at once (A passes, no loop over Gaussians). Where the colour clamp max(., 0) is
-    active the colour rows are 0 (as autograd of the renderer gives). Rows of culled Gaussians are finite but
-    meaningless (the rasterizer gives them no pixels).
-
-    Args:
-        means: [N, 3]; quats: raw wxyz [N, 4]; log_scales: [N, 3]; logit_opacities: [N]; sh_coeffs: [N, K, 3]
-        sh_degree: active SH degree for the colour; viewmat [4, 4], intrinsics [4], width, height: the camera.
-        param_groups: which raw parameters form the columns, a subsequence of
-            ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest") in any order.
-    Returns:
-        J, in the dtype of `means`. [N, A, P]
-    """
-    bad = [g for g in param_groups if g not in PARAM_GROUPS]
-    if bad or len(set(param_groups)) != len(param_groups) or not param_groups:
-        raise UserError(f"Fisher parameter groups {tuple(param_groups)} are invalid; choose distinct names from "
-                        f"{', '.join(PARAM_GROUPS)}")
-    n = means.shape[0]
-    assert sh_coeffs.ndim == 3 and sh_coeffs.shape[0] == n and sh_coeffs.shape[1] >= num_sh_bases(sh_degree), \
-        f"sh_coeffs must be [N,K,3] with N = {n}, K >= {num_sh_bases(sh_degree)}, got {tuple(sh_coeffs.shape)}"
-    assert logit_opacities.shape == (n,), f"logit_opacities must be [N], got {tuple(logit_opacities.shape)}"
-    assert log_scales.shape == (n, 3), f"log_scales must be [N,3], got {tuple(log_scales.shape)}"
-    sh_dc, sh_rest = sh_coeffs[:, :1], sh_coeffs[:, 1:]
-    raw = {"means": means, "quats": quats, "log_scales": log_scales, "logit_opacities": logit_opacities[:, None],
-           "sh_dc": sh_dc, "sh_rest": sh_rest}
-    leaves = {k: raw[k].detach().clone().requires_grad_(True) for k in param_groups}
-    get = {k: leaves[k] if k in leaves else raw[k].detach() for k in raw}
-    with torch.enable_grad():
-        proj = project_gaussians(get["means"], get["quats"], torch.exp(get["log_scales"]), viewmat, intrinsics,
-                                 width, height)
-        colors = sh_to_colors(torch.cat([get["sh_dc"], get["sh_rest"]], dim=1), get["means"],
-                              camera_center(viewmat).to(means.dtype), sh_degree)
-        attrs = torch.cat([proj.means2d, proj.conics, torch.sigmoid(get["logit_opacities"]), colors], dim=1)  # [N, A]
-        rows = []
-        inputs = [leaves[k] for k in param_groups]
-        for a in range(attrs.shape[1]):
-            grads = torch.autograd.grad(attrs[:, a].sum(), inputs, retain_graph=True, allow_unused=True)
-            rows.append(torch.cat([(g if g is not None else torch.zeros_like(x)).reshape(x.shape[0], -1)
-                                   for g, x in zip(grads, inputs)], dim=1))
-    return torch.stack(rows, dim=1)  # [N, A, P]

@@ -15,6 +15,11 @@ SIGMA_EXTENT = 3.0  # radius in standard deviations of the largest axis of the 2
 MAX_RADIUS = 1e6  # keeps the integer radius finite for nearly degenerate, huge splats
 
 
+def camera_center(viewmat: torch.Tensor) -> torch.Tensor:
+    """World position of the camera of a world-to-camera matrix. [4,4] -> [3]"""
+    return -viewmat[:3, :3].T @ viewmat[:3, 3]
+
+
 def quat_to_rotmat(quats: torch.Tensor) -> torch.Tensor:
     """Rotation matrices from quaternions (wxyz, normalised inside).
 

@@ -6,9 +6,7 @@ Gaussians deep at a time: the working set is [tiles, chunk_size, tile_size^2], n
 it replays the chunks front to back and gets every pair's d colour / d alpha in closed form from the running
 prefix colour and the saved final colour (the CUDA 3DGS kernel does the same back to front).
 
-The same per-pair replay gives the Fisher-ready partials: `attribute_gram` accumulates, per Gaussian, the Gram
-matrix of d pixel colour / d 2D attributes over all pixels and channels, and `pixel_attribute_partials` returns the
-packed per-pair Jacobians (small images; used by tests).
+The same per-pair replay gives the Fisher-ready partials of `gaussian_renderer.fisher_partials`.
 
 2D attributes of Gaussian i (A = 6 + D): mean x, mean y, conic a, b, c, opacity, colour[D].
 Conventions: pixel (x, y) has its centre at (x + 0.5, y + 0.5); conic (a, b, c) is [[a, b], [b, c]].
@@ -298,100 +296,3 @@ def rasterize(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tens
     _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
     bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
     return _RasterizeFunction.apply(means2d, conics, opacities, colors, background, bins, width, height, settings)
-
-
-@torch.no_grad()
-def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, colors: torch.Tensor,
-                   depths: torch.Tensor, radii: torch.Tensor, width: int, height: int, background: torch.Tensor,
-                   settings: RasterSettings | None = None, weights: torch.Tensor | None = None) -> torch.Tensor:
-    """Per-Gaussian Gram matrix of the pixel-colour partials w.r.t. the 2D attributes.
-
-    G_i = sum_pixels weight_p sum_channels (dC_pc / da_i)(dC_pc / da_i)^T, a_i = (mean x, y, conic a, b, c, opacity, colour).
-    Per pair the Jacobian is [u v^T | w I] with u = dC/dalpha [D], v = dalpha/d(geometry) [6], w = alpha T, so the
-    Gram is [[|u|^2 v v^T, w v u^T], [w u v^T, w^2 I]]. One forward pass gives the final colours (u needs them),
-    then a replay sums these blocks over each tile's pixels with one small matrix product per (tile, Gaussian), in
-    the input dtype, before a float64 scatter per Gaussian. Memory stays at one chunk's pairs.
-
-    Args:
-        weights: optional per-pixel weights (e.g. inverse noise variances or a mask), 1 when None. [H, W]
-    Returns:
-        float64 Gram matrices. [N, A, A], A = 6 + D
-    """
-    settings = settings or RasterSettings()
-    _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
-    assert weights is None or weights.shape == (height, width), f"weights must be [H,W], got {tuple(weights.shape)}"
-    n, d = colors.shape
-    geo = NUM_GEOMETRY_ATTRIBUTES
-    bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
-    pixel_weights = None if weights is None else _from_image(weights[None].to(means2d.dtype), bins)[..., 0]  # [T, P]
-    final_color = _composite(bins, means2d, conics, opacities, colors, background, settings)[0].transpose(1, 2)
-    final_color = final_color.contiguous()  # [T, D, P]
-    prefix = torch.zeros_like(final_color)
-    # Per Gaussian: [v (|u|^2 v)^T | v (w u)^T] (6 x (6 + D)) and sum w^2, accumulated in float64 across tiles.
-    sums = torch.zeros(n, geo * (geo + d) + 1, dtype=torch.float64, device=means2d.device)
-    for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
-        u = _color_alpha_partials(chunk, colors, final_color, prefix)  # [Ta, c, D, P]
-        v = _alpha_partials(chunk, conics, dim=2)  # [Ta, c, 6, P]
-        t, c, _, p = v.shape
-        uu, w = (u * u).sum(2, keepdim=True), chunk.weight[:, :, None, :]  # [Ta, c, 1, P] each
-        ww = w * w
-        if pixel_weights is not None:
-            wp = pixel_weights[chunk.tiles][:, None, None, :]  # [Ta, 1, 1, P]
-            uu, ww = uu * wp, ww * wp
-            w = w * wp
-        right = torch.cat([uu * v, w * u], dim=2)  # [Ta, c, 6 + D, P]
-        prod = torch.bmm(v.reshape(t * c, geo, p), right.reshape(t * c, geo + d, p).transpose(1, 2))
-        ww = ww.sum((2, 3)).reshape(t * c, 1)
-        rows = torch.cat([prod.reshape(t * c, -1), ww], dim=1).double()
-        sums += _scatter_rows(rows.reshape(t, c, -1), chunk.ids, n)
-    prod = sums[:, :-1].reshape(n, geo, geo + d)
-    gram = torch.zeros(n, geo + d, geo + d, dtype=torch.float64, device=means2d.device)
-    gram[:, :geo, :] = prod
-    gram[:, :geo, :geo] = 0.5 * (prod[:, :, :geo] + prod[:, :, :geo].transpose(1, 2))  # exactly symmetric
-    gram[:, geo:, :geo] = prod[:, :, geo:].transpose(1, 2)
-    gram[:, geo:, geo:] = sums[:, -1, None, None] * torch.eye(d, dtype=torch.float64, device=means2d.device)
-    return gram
-
-
-@dataclass
-class PairPartials:
-    """Packed per-(pixel, Gaussian) Jacobians of the pixel colour w.r.t. the Gaussian's 2D attributes."""
-
-    pixel_ids: torch.Tensor  # [M] flat pixel index y * W + x
-    gaussian_ids: torch.Tensor  # [M]
-    jac: torch.Tensor  # [M, D, A]
-
-
-@torch.no_grad()
-def pixel_attribute_partials(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
-                             colors: torch.Tensor, depths: torch.Tensor, radii: torch.Tensor, width: int,
-                             height: int, background: torch.Tensor,
-                             settings: RasterSettings | None = None) -> PairPartials:
-    """Closed-form d colour / d 2D attributes for every contributing pair (no autograd). Small images only.
-
-    A pair contributes when its alpha survives the cut-offs (alpha_min, power <= 0, early stop); clamped pairs
-    keep their colour and background terms but have zero alpha derivative.
-    """
-    settings = settings or RasterSettings()
-    _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
-    d = colors.shape[1]
-    bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
-    final_color = _composite(bins, means2d, conics, opacities, colors, background, settings)[0].transpose(1, 2)
-    final_color = final_color.contiguous()  # [T, D, P]
-    prefix = torch.zeros_like(final_color)
-    pix, gid, jacs = [], [], []
-    eye = torch.eye(d, dtype=means2d.dtype, device=means2d.device)
-    for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
-        u = _color_alpha_partials(chunk, colors, final_color, prefix).transpose(2, 3)  # [Ta, c, P, D]
-        v = _alpha_partials(chunk, conics)  # [Ta, c, P, 6]
-        jac = torch.cat([u[..., :, None] * v[..., None, :],
-                         chunk.weight[..., None, None] * eye], dim=-1)  # [Ta, c, P, D, A]
-        mask = chunk.alpha > 0
-        t_idx, c_idx, p_idx = torch.nonzero(mask, as_tuple=True)
-        pix.append(bins.pixel_index[chunk.tiles[t_idx], p_idx])
-        gid.append(chunk.ids[t_idx, c_idx])
-        jacs.append(jac[mask])
-    if not jacs:
-        empty = torch.zeros(0, dtype=torch.long, device=means2d.device)
-        return PairPartials(empty, empty, means2d.new_zeros(0, d, NUM_GEOMETRY_ATTRIBUTES + d))
-    return PairPartials(torch.cat(pix), torch.cat(gid), torch.cat(jacs))

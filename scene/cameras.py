@@ -7,6 +7,8 @@ from dataclasses import dataclass, replace
 
 import torch
 
+from gaussian_renderer.projection import camera_center
+
 
 @dataclass
 class Camera:
@@ -36,7 +38,7 @@ class Camera:
     @property
     def camera_center(self) -> torch.Tensor:
         """Camera position in world coordinates. [3]"""
-        return -self.viewmat[:3, :3].T @ self.viewmat[:3, 3]
+        return camera_center(self.viewmat)
 
     @property
     def fov_x(self) -> float:

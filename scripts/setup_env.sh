@@ -15,4 +15,5 @@ if [ ! -x "$venv/bin/python" ] || [ ! -f "$venv/.complete" ]; then
 else
   echo "setup_env: reusing virtualenv $venv" >&2
 fi
+ln -sfn "$venv" "$root/.venv"  # .venv/bin/python is the project's python (a symlink, not tracked)
 echo "$venv/bin/python"

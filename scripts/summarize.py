@@ -218,7 +218,7 @@ def markdown_table(rows: list[dict], digits: dict[str, int]) -> str:
 
 def write_outputs(runs: list[Run], out: Path) -> list[Path]:
     """Write summary.md, summary.csv and the plots into `out`; returns the files written."""
-    from utils import plots
+    from scripts import plots
 
     out.mkdir(parents=True, exist_ok=True)
     quality, oracles, times = quality_rows(runs), oracle_rows(runs), time_rows(runs)

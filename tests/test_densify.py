@@ -4,9 +4,9 @@ import math
 import pytest
 import torch
 
-from scene.densify import DensifyConfig, DensifyStrategy
+from training.densify import DensifyConfig, DensifyStrategy
 from scene.gaussian_model import GaussianModel
-from scene.optim import OptimConfig, create_optimizer
+from training.optim import OptimConfig, create_optimizer
 
 W, H, EXTENT = 200, 100, 10.0  # percent_dense * extent = 0.1 separates clone from split
 CFG = DensifyConfig(densify_from_iter=0, densification_interval=2, opacity_reset_interval=1000)

@@ -3,7 +3,7 @@ import pytest
 import torch
 
 from gaussian_renderer import RasterSettings, attribute_gram, project_gaussians, projection_jacobian, rasterization
-from gaussian_renderer.api import camera_center
+from gaussian_renderer import camera_center
 from gaussian_renderer.reference import rasterize_reference
 from gaussian_renderer.sh import sh_to_colors
 from tests.scenes import intrinsics_for, look_at_viewmat, random_gaussians

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from scene.gaussian_model import GaussianModel
-from scene.optim import OptimConfig, PositionLRSchedule, create_optimizer
+from training.optim import OptimConfig, PositionLRSchedule, create_optimizer
 
 
 def test_schedule_closed_form():

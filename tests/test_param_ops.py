@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from scene.gaussian_model import GaussianModel
-from scene.optim import OptimConfig, create_optimizer
-from scene.param_ops import append_params, prune_params, replace_param
+from training.optim import OptimConfig, create_optimizer
+from training.param_ops import append_params, prune_params, replace_param
 
 SHAPES = {"means": (3,), "sh_dc": (1, 3), "sh_rest": (3, 3), "log_scales": (3,), "quats": (4,),
           "logit_opacities": ()}

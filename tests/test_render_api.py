@@ -3,7 +3,7 @@ import pytest
 import torch
 
 from gaussian_renderer import RasterSettings, project_gaussians, projection_jacobian, rasterization, render
-from gaussian_renderer.api import camera_center
+from gaussian_renderer import camera_center
 from gaussian_renderer.reference import rasterize_reference
 from gaussian_renderer.sh import C0, sh_to_colors
 from scene.cameras import Camera

@@ -10,7 +10,7 @@ import torch
 
 from gaussian_renderer.projection import quat_to_rotmat
 from scene.gaussian_model import GaussianModel
-from scene.param_ops import append_params, prune_params, replace_param
+from training.param_ops import append_params, prune_params, replace_param
 from utils.errors import UserError
 
 logger = logging.getLogger(__name__)

@@ -1,0 +1,1 @@
+"""Training-only pieces beside the trainer: the optimiser and its schedule, densification, parameter surgery."""

@@ -5,46 +5,18 @@
 from __future__ import annotations
 
 import argparse
-import json
-import re
 import shutil
 from pathlib import Path
 
 import torch
 from tqdm import tqdm
 
-from arguments import ModelConfig, PipelineConfig, config_from_dict
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
-from scene.scene import Scene
-from utils.errors import UserError, run_cli
+from scene.trained import load_trained
+from utils.errors import run_cli
 from utils.image import save_image
-
-
-def load_model_config(model_path: Path) -> tuple[ModelConfig, PipelineConfig]:
-    """The model and pipeline configs saved by train.py in `cfg_args`."""
-    cfg_file = model_path / "cfg_args"
-    if not cfg_file.is_file():
-        raise UserError(f"{model_path} has no cfg_args: it is not a model directory written by train.py")
-    try:
-        saved = json.loads(cfg_file.read_text())
-        return config_from_dict(ModelConfig, saved["model"]), config_from_dict(PipelineConfig, saved["pipeline"])
-    except (ValueError, KeyError, TypeError):
-        raise UserError(f"{cfg_file} is malformed; retrain the model or restore the file") from None
-
-
-def find_iteration(model_path: Path, iteration: int) -> int:
-    """The requested saved iteration, or the largest one when `iteration` is -1."""
-    found = sorted(int(m.group(1)) for p in (model_path / "point_cloud").glob("iteration_*")
-                   if (m := re.match(r"iteration_(\d+)$", p.name)) and (p / "point_cloud.ply").is_file())
-    if not found:
-        raise UserError(f"{model_path} has no point_cloud/iteration_*/point_cloud.ply: train it first (train.py)")
-    if iteration == -1:
-        return found[-1]
-    if iteration not in found:
-        raise UserError(f"iteration {iteration} was not saved in {model_path}; saved: {found}")
-    return iteration
 
 
 @torch.no_grad()
@@ -64,20 +36,13 @@ def render_set(out_dir: Path, cameras: list[Camera], gaussians: GaussianModel, b
 def render_model(model_path: str | Path, iteration: int = -1, skip_train: bool = False, skip_test: bool = False,
                  source_path: str | None = None, quiet: bool = False) -> int:
     """Render one model directory; returns the iteration rendered."""
-    model_path = Path(model_path)
-    model_cfg, pipeline_cfg = load_model_config(model_path)
-    iteration = find_iteration(model_path, iteration)
-    scene = Scene.load(source_path or model_cfg.source_path, model_path, white_background=model_cfg.white_background,
-                       resolution=model_cfg.resolution, eval=model_cfg.eval, images=model_cfg.images,
-                       device=model_cfg.device)
-    gaussians = GaussianModel.load_ply(model_path / "point_cloud" / f"iteration_{iteration}" / "point_cloud.ply",
-                                       device=model_cfg.device)
-    background = torch.tensor([1.0] * 3 if model_cfg.white_background else [0.0] * 3, device=model_cfg.device)
-    settings = RasterSettings(tile_size=pipeline_cfg.tile_size)
-    for split, cameras, skip in (("train", scene.train_cameras, skip_train), ("test", scene.test_cameras, skip_test)):
+    trained = load_trained(model_path, iteration, source_path)
+    for split, cameras, skip in (("train", trained.scene.train_cameras, skip_train),
+                                 ("test", trained.scene.test_cameras, skip_test)):
         if not skip and cameras:
-            render_set(model_path / split / f"ours_{iteration}", cameras, gaussians, background, settings, quiet)
-    return iteration
+            render_set(trained.path / split / f"ours_{trained.iteration}", cameras, trained.gaussians,
+                       trained.background, trained.settings, quiet)
+    return trained.iteration
 
 
 def main() -> None:

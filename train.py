@@ -1,7 +1,10 @@
 """Train a 3D Gaussian Splatting model, optionally with active view selection.
 
     python train.py -s data/lego -r 8 --eval                          # all training views
-    python train.py -s data/lego -r 8 --eval --method lite_gs --eps 0.1 # active: seed views + K per step
+    python train.py -s data/lego -r 8 --eval --method NAME              # active: seed views + K per step
+
+--method takes any registered selector (listed under --method below); its own options (e.g. --eps) are in the
+"Selector options" group.
 
 Every acquisition stage ends with a checkpoint; rerunning the same command resumes from the newest one.
 """
@@ -10,7 +13,6 @@ from __future__ import annotations
 import argparse
 import logging
 import random
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,19 +21,19 @@ from typing import Any
 import torch
 from tqdm import tqdm
 
-import active  # noqa: F401  (registers the selectors)
-from active.base import SelectionContext
+from active import Selector, SelectionContext, build_selector_from, list_selectors
 from active.fisher import FisherOracle
-from active.registry import build_selector, list_selectors
+from active.registry import selector_options_dataclass
 from active.schedule import StagePlan, farthest_point_views, plan_stages
 from arguments import (ActiveConfig, ModelConfig, PipelineConfig, RunConfig, add_config_args, config_from_args,
                        config_to_dict)
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
-from training.densify import DensifyConfig, DensifyStrategy
 from scene.gaussian_model import GaussianModel
-from training.optim import OptimConfig, PositionLRSchedule, create_optimizer
 from scene.scene import Scene
+from scene.trained import background_color, raster_settings
+from training.densify import DensifyConfig, DensifyStrategy
+from training.optim import OptimConfig, PositionLRSchedule, create_optimizer
 from utils.checkpoint import RunDirectory
 from utils.errors import UserError, run_cli
 from utils.io import write_json
@@ -41,20 +43,34 @@ from utils.seeding import rng_state, seed_everything, set_rng_state
 log = logging.getLogger("train")
 
 
+SelectorOptions = selector_options_dataclass()  # one flag per option of the registered selectors (e.g. --eps)
+
+# The config groups of a run, once: (attribute of TrainConfig, dataclass, --help section title).
+CONFIG_GROUPS: tuple[tuple[str, type, str], ...] = (
+    ("model", ModelConfig, "Model"),
+    ("pipeline", PipelineConfig, "Pipeline"),
+    ("optim", OptimConfig, "Optimization"),
+    ("densify", DensifyConfig, "Densification"),
+    ("active", ActiveConfig, "Active view selection"),
+    ("selector", SelectorOptions, "Selector options (each used by the selectors named in brackets)"),
+    ("run", RunConfig, "Run"),
+)
+
+
 @dataclass
 class TrainConfig:
-    """All config groups of one run."""
+    """All config groups of one run (`CONFIG_GROUPS`)."""
 
     model: ModelConfig
     pipeline: PipelineConfig
     optim: OptimConfig
     densify: DensifyConfig
     active: ActiveConfig
+    selector: Any  # SelectorOptions
     run: RunConfig
 
     def to_dict(self) -> dict[str, Any]:
-        return {name: config_to_dict(getattr(self, name))
-                for name in ("model", "pipeline", "optim", "densify", "active", "run")}
+        return {name: config_to_dict(getattr(self, name)) for name, _, _ in CONFIG_GROUPS}
 
 
 @dataclass
@@ -73,12 +89,8 @@ class TrainState:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_config_args(parser, ModelConfig, "Model")
-    add_config_args(parser, PipelineConfig, "Pipeline")
-    add_config_args(parser, OptimConfig, "Optimization")
-    add_config_args(parser, DensifyConfig, "Densification")
-    add_config_args(parser, ActiveConfig, "Active view selection")
-    add_config_args(parser, RunConfig, "Run")
+    for _, cls, title in CONFIG_GROUPS:
+        add_config_args(parser, cls, title)
     for action in parser._actions:  # list the registered selectors in --method's help
         if action.dest == "method":
             action.help = f"view selector, one of {', '.join(list_selectors())}; empty = train on all training views"
@@ -87,14 +99,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def parse_config(argv: list[str] | None = None) -> TrainConfig:
     ns = build_parser().parse_args(argv)
-    cfg = TrainConfig(*(config_from_args(cls, ns) for cls in
-                        (ModelConfig, PipelineConfig, OptimConfig, DensifyConfig, ActiveConfig, RunConfig)))
+    cfg = TrainConfig(**{name: config_from_args(cls, ns) for name, cls, _ in CONFIG_GROUPS})
     validate_config(cfg)
     return cfg
 
 
 def validate_config(cfg: TrainConfig) -> None:
-    """Reject bad flag values with one clear line each."""
+    """Reject bad flag values with one clear line each (the selector's own options by its config)."""
     if not cfg.model.source_path:
         raise UserError("no dataset given: pass -s/--source_path DIR (e.g. data/builtin, made by `python -m scene.builtin data/builtin`)")
     if cfg.run.iterations <= 0:
@@ -103,12 +114,16 @@ def validate_config(cfg: TrainConfig) -> None:
         raise UserError("--device cuda was asked for but torch sees no CUDA device; use --device cpu")
     a = cfg.active
     if a.method:
-        if a.method not in list_selectors():
-            raise UserError(f"unknown --method {a.method!r}; choose one of: {', '.join(list_selectors())}")
-        if not 0.0 < a.eps < 1.0:
-            raise UserError(f"--eps must lie in (0, 1), got {a.eps}")
+        make_selector(cfg)
         if a.sigma <= 0:
             raise UserError(f"--sigma must be positive, got {a.sigma}")
+
+
+def make_selector(cfg: TrainConfig) -> Selector:
+    """The run's selector, built from --method and the selector flags it declares (validated by its config)."""
+    if cfg.active.method not in list_selectors():
+        raise UserError(f"unknown --method {cfg.active.method!r}; choose one of: {', '.join(list_selectors())}")
+    return build_selector_from(cfg.active.method, config_to_dict(cfg.selector))
 
 
 def default_model_path(cfg: TrainConfig) -> str:
@@ -164,23 +179,20 @@ def test_psnr(gaussians: GaussianModel, cameras: list[Camera], background: torch
 # ----------------------------------------------------------------------------------------------- selection
 
 
-def select_views(state: TrainState, scene: Scene, cfg: TrainConfig, k: int, background: torch.Tensor,
-                 settings: RasterSettings) -> dict[str, Any]:
+def select_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: Selector, k: int,
+                 background: torch.Tensor, settings: RasterSettings) -> dict[str, Any]:
     """Run the selector for one acquisition step; returns the stage record for selection.json."""
     a = cfg.active
     candidates = [v for v in range(len(scene.train_cameras)) if v not in state.train_views]
     t0 = time.perf_counter()
-    options = {"eps": a.eps} if a.method in ("lite_gs", "ssg") else {}
-    selector = build_selector(a.method, **options)
     oracle = None
     if selector.uses_oracle:
         oracle = FisherOracle.build(state.gaussians, scene.train_cameras, state.train_views, background, settings,
                                     sigma=a.sigma, delta_rel=a.delta_rel, delta_abs=a.delta_abs,
                                     param_groups=a.fisher_params, mode=a.fisher_mode, cache_mb=a.fisher_cache_mb)
     generator = torch.Generator().manual_seed(cfg.run.seed * 100_003 + state.stage)
-    selection = selector.select(SelectionContext(candidate_ids=candidates,
-                                                 oracle=oracle.gain_oracle if oracle else None,
-                                                 generator=generator, stage=state.stage), k)
+    selection = selector.select(SelectionContext(candidate_ids=candidates, oracle=oracle, generator=generator,
+                                                 stage=state.stage), k)
     select_seconds = time.perf_counter() - t0
     return {
         "stage": state.stage,
@@ -189,8 +201,7 @@ def select_views(state: TrainState, scene: Scene, cfg: TrainConfig, k: int, back
         "candidates": len(candidates),
         "selected": [int(v) for v in selection.ids],
         "gains": [float(g) for g in selection.gains],
-        "oracle_calls": {"conservative": selection.oracle_calls.conservative,
-                         "evaluated": selection.oracle_calls.evaluated},
+        "oracle_calls": {"conservative": selection.conservative, "evaluated": oracle.evaluated if oracle else 0},
         "fisher_views_computed": oracle.views_computed if oracle else 0,
         "fisher_seconds": oracle.fisher_seconds if oracle else 0.0,
         "select_seconds": select_seconds,
@@ -221,30 +232,47 @@ def fresh_state(scene: Scene, cfg: TrainConfig, train_views: list[int], total_it
     return TrainState(gaussians, optimizer, DensifyStrategy(cfg.densify, total_iterations), train_views=list(train_views))
 
 
-def training(cfg: TrainConfig) -> Path:
-    """Run (or resume) one training run; returns the model directory."""
-    model_path = cfg.model.model_path or default_model_path(cfg)
+def make_plan(cfg: TrainConfig, pool: int) -> StagePlan:
+    """The stage plan; a --iterations shorter than the acquisition schedule is raised to it, with one note (the
+    effective total is recorded in cfg_args as `total_iterations`)."""
+    a = cfg.active
+    if not a.method:
+        return StagePlan((), (pool,), (cfg.run.iterations,), cfg.run.iterations)
+    num_init = len(a.init_views) or a.num_init_views
+    plan = plan_stages(num_init, a.views_per_step, a.max_views, pool, a.iters_per_view, cfg.run.iterations)
+    if plan.total_iterations > cfg.run.iterations:
+        stages = " + ".join(str(a.iters_per_view * v) for v in plan.views_in_stage[:-1])
+        print(f"note: --iterations {cfg.run.iterations} is shorter than the acquisition schedule (stages of {stages} "
+              f"= {plan.total_iterations} iterations); training {plan.total_iterations} iterations "
+              "(recorded in cfg_args as total_iterations)")
+    return plan
+
+
+@dataclass
+class Run:
+    """An open run: the loaded scene, its plan, the rasterizer set-up and the training state."""
+
+    cfg: TrainConfig
+    run_dir: RunDirectory
+    scene: Scene
+    plan: StagePlan
+    selector: Selector | None
+    background: torch.Tensor  # [3]
+    settings: RasterSettings
+    state: TrainState
+    rng: random.Random  # the view order of the training passes
+    lr_schedule: PositionLRSchedule
+
+
+def open_run(cfg: TrainConfig, model_path: str) -> Run:
+    """Load the scene and resume from the newest checkpoint of `model_path`, or start the run there."""
     run_dir = RunDirectory(model_path)
-    if run_dir.is_complete() and not cfg.run.overwrite:
-        print(f"{model_path}: this run already finished (run_status.json says complete); "
-              "pass --overwrite to train it again")
-        return Path(model_path)
     if cfg.run.overwrite:
         run_dir.clear()
     scene = Scene.load(cfg.model.source_path, model_path, white_background=cfg.model.white_background,
                        resolution=cfg.model.resolution, eval=cfg.model.eval, images=cfg.model.images,
                        device=cfg.model.device)
-    pool = len(scene.train_cameras)
-    a = cfg.active
-    if a.method:
-        num_init = len(a.init_views) or a.num_init_views
-        plan = plan_stages(num_init, a.views_per_step, a.max_views, pool, a.iters_per_view, cfg.run.iterations)
-    else:
-        plan = StagePlan((), (pool,), (cfg.run.iterations,), cfg.run.iterations)
-    background = torch.tensor([1.0, 1.0, 1.0] if cfg.model.white_background else [0.0, 0.0, 0.0],
-                              device=cfg.model.device)
-    settings = RasterSettings(tile_size=cfg.pipeline.tile_size)
-
+    plan = make_plan(cfg, len(scene.train_cameras))
     seed_everything(cfg.run.seed)
     rng = random.Random(cfg.run.seed)
     checkpoint = run_dir.latest_checkpoint()
@@ -255,77 +283,104 @@ def training(cfg: TrainConfig) -> Path:
         set_rng_state(checkpoint["rng"])
         print(f"{model_path}: resuming from iteration {state.iteration} (stage {state.stage})")
     else:
-        train_views = seed_views(scene, cfg) if a.method else list(range(pool))
+        train_views = seed_views(scene, cfg) if cfg.active.method else list(range(len(scene.train_cameras)))
         state = fresh_state(scene, cfg, train_views, plan.total_iterations)
-        run_dir.start(cfg.to_dict())
+        run_dir.start({**cfg.to_dict(), "total_iterations": plan.total_iterations})
         scene.write_cameras_json()
         state.gaussians.save_ply(Path(model_path) / "input.ply")
-        if a.method:
-            remaining = plan.adds[-1] if plan.adds else 0
-            if plan.adds and remaining != a.views_per_step:
-                print(f"note: K={a.views_per_step} does not divide the remaining budget; "
-                      f"the last step adds {remaining} view(s)")
+        if plan.adds and plan.adds[-1] != cfg.active.views_per_step:
+            print(f"note: K={cfg.active.views_per_step} does not divide the remaining budget; "
+                  f"the last step adds {plan.adds[-1]} view(s)")
+    return Run(cfg, run_dir, scene, plan, make_selector(cfg) if cfg.active.method else None,
+               background_color(cfg.model), raster_settings(cfg.pipeline), state, rng,
+               PositionLRSchedule.from_config(cfg.optim, scene.extent))
 
-    lr_schedule = PositionLRSchedule.from_config(cfg.optim, scene.extent)
-    progress = tqdm(total=plan.total_iterations, initial=state.iteration, disable=cfg.run.quiet,
-                    desc="training", dynamic_ncols=True)
-    extra_ckpts = set(cfg.run.checkpoint_iterations)
-    save_its = set(cfg.run.save_iterations) | {plan.total_iterations}
-    test_its = set(cfg.run.test_iterations)
-    while True:
-        stage_end = plan.stage_end[state.stage]
-        while state.iteration < stage_end:
-            cam = scene.train_cameras[next_view(state, rng)]
-            loss, train_psnr = training_step(state, cam, cfg, background, settings, lr_schedule, scene.extent)
-            progress.update(1)
-            if state.iteration % 10 == 0:
-                progress.set_postfix(loss=f"{loss:.4f}", psnr=f"{train_psnr:.2f}", gaussians=state.gaussians.num_gaussians,
-                                     views=len(state.train_views))
-            if state.iteration in test_its:
-                value = test_psnr(state.gaussians, scene.test_cameras, background, settings)
-                progress.write(f"[iter {state.iteration}] test PSNR {value:.2f} dB" if value is not None
-                               else f"[iter {state.iteration}] no test views (use --eval)")
-            if state.iteration in save_its:
-                scene.save_gaussians(state.gaussians, state.iteration)
-            if state.iteration in extra_ckpts:
-                run_dir.save_checkpoint(capture_state(state, rng, cfg))
-        if state.stage >= len(plan.adds):
-            break
-        k = plan.adds[state.stage]
-        progress.write(f"[stage {state.stage}] selecting {k} of {pool - len(state.train_views)} candidates "
-                       f"with {a.method}")
-        record = select_views(state, scene, cfg, k, background, settings)
-        state.stages.append(record)
-        state.train_views = state.train_views + record["selected"]
-        state.view_stack = []
-        state.stage += 1
-        if a.stage_reset:
-            reset = fresh_state(scene, cfg, state.train_views, plan.total_iterations)
-            state.gaussians, state.optimizer, state.strategy = reset.gaussians, reset.optimizer, reset.strategy
-        write_selection(run_dir, cfg, state)
-        run_dir.save_checkpoint(capture_state(state, rng, cfg))
-    progress.close()
 
-    final_psnr = test_psnr(state.gaussians, scene.test_cameras, background, settings)
-    if a.method:
-        write_selection(run_dir, cfg, state, final={"iteration": state.iteration, "train_views": state.train_views,
-                                                     "test_psnr": final_psnr})
-    run_dir.finish({"iteration": state.iteration, "num_gaussians": state.gaussians.num_gaussians,
-                    "train_views": state.train_views, "test_psnr": final_psnr})
+def train_stage(run: Run, progress: tqdm) -> None:
+    """Train until the current stage ends, with the periodic test reports, PLY saves and extra checkpoints."""
+    state, run_cfg = run.state, run.cfg.run
+    save_its = set(run_cfg.save_iterations) | {run.plan.total_iterations}
+    while state.iteration < run.plan.stage_end[state.stage]:
+        cam = run.scene.train_cameras[next_view(state, run.rng)]
+        loss, train_psnr = training_step(state, cam, run.cfg, run.background, run.settings, run.lr_schedule,
+                                         run.scene.extent)
+        progress.update(1)
+        if state.iteration % 10 == 0:
+            progress.set_postfix(loss=f"{loss:.4f}", psnr=f"{train_psnr:.2f}", gaussians=state.gaussians.num_gaussians,
+                                 views=len(state.train_views))
+        if state.iteration in run_cfg.test_iterations:
+            value = test_psnr(state.gaussians, run.scene.test_cameras, run.background, run.settings)
+            progress.write(f"[iter {state.iteration}] test PSNR {value:.2f} dB" if value is not None
+                           else f"[iter {state.iteration}] no test views (use --eval)")
+        if state.iteration in save_its:
+            run.scene.save_gaussians(state.gaussians, state.iteration)
+        if state.iteration in run_cfg.checkpoint_iterations:
+            run.run_dir.save_checkpoint(capture_state(state, run.rng, run.cfg))
+
+
+def acquire(run: Run, progress: tqdm) -> None:
+    """One acquisition step: select the next views, add them, optionally reset the model, write selection.json and
+    the stage checkpoint."""
+    state, cfg = run.state, run.cfg
+    k = run.plan.adds[state.stage]
+    progress.write(f"[stage {state.stage}] selecting {k} of {len(run.scene.train_cameras) - len(state.train_views)} "
+                   f"candidates with {cfg.active.method}")
+    record = select_views(state, run.scene, cfg, run.selector, k, run.background, run.settings)
+    state.stages.append(record)
+    state.train_views = state.train_views + record["selected"]
+    state.view_stack = []
+    state.stage += 1
+    if cfg.active.stage_reset:
+        reset = fresh_state(run.scene, cfg, state.train_views, run.plan.total_iterations)
+        state.gaussians, state.optimizer, state.strategy = reset.gaussians, reset.optimizer, reset.strategy
+    write_selection(run)
+    run.run_dir.save_checkpoint(capture_state(state, run.rng, cfg))
+
+
+def finish(run: Run) -> None:
+    """Final test PSNR, the final selection record and run_status.json "complete"."""
+    state = run.state
+    final_psnr = test_psnr(state.gaussians, run.scene.test_cameras, run.background, run.settings)
+    if run.selector is not None:
+        write_selection(run, final={"iteration": state.iteration, "train_views": state.train_views,
+                                    "test_psnr": final_psnr})
+    run.run_dir.finish({"iteration": state.iteration, "num_gaussians": state.gaussians.num_gaussians,
+                        "train_views": state.train_views, "test_psnr": final_psnr})
     msg = f"test PSNR {final_psnr:.2f} dB" if final_psnr is not None else "no test views (pass --eval for a test split)"
-    print(f"{model_path}: trained {state.iteration} iterations on {len(state.train_views)} views, "
+    print(f"{run.run_dir.path}: trained {state.iteration} iterations on {len(state.train_views)} views, "
           f"{state.gaussians.num_gaussians} Gaussians, {msg}")
+
+
+def training(cfg: TrainConfig) -> Path:
+    """Run (or resume) one training run: open it, then train each stage and acquire after it, then finish."""
+    model_path = cfg.model.model_path or default_model_path(cfg)
+    if RunDirectory(model_path).is_complete() and not cfg.run.overwrite:
+        print(f"{model_path}: this run already finished (run_status.json says complete); "
+              "pass --overwrite to train it again")
+        return Path(model_path)
+    run = open_run(cfg, model_path)
+    progress = tqdm(total=run.plan.total_iterations, initial=run.state.iteration, disable=cfg.run.quiet,
+                    desc="training", dynamic_ncols=True)
+    while True:
+        train_stage(run, progress)
+        if run.state.stage >= len(run.plan.adds):
+            break
+        acquire(run, progress)
+    progress.close()
+    finish(run)
     return Path(model_path)
 
 
-def write_selection(run_dir: RunDirectory, cfg: TrainConfig, state: TrainState,
-                    final: dict[str, Any] | None = None) -> None:
-    data: dict[str, Any] = {"config": {**config_to_dict(cfg.active), "seed": cfg.run.seed,
-                                       "iterations": cfg.run.iterations, "source_path": cfg.model.source_path},
-                            "stages": state.stages}
+def write_selection(run: Run, final: dict[str, Any] | None = None) -> None:
+    """selection.json: the active config with the selector's own options, every stage record, the final record."""
+    cfg = run.cfg
+    data: dict[str, Any] = {"config": {**config_to_dict(cfg.active), "selector_options": run.selector.options(),
+                                       "seed": cfg.run.seed, "iterations": cfg.run.iterations,
+                                       "source_path": cfg.model.source_path},
+                            "stages": run.state.stages}
     if final is not None:
         data["final"] = final
-    write_json(run_dir.path / "selection.json", data)
+    write_json(run.run_dir.path / "selection.json", data)
 
 
 def capture_state(state: TrainState, rng: random.Random, cfg: TrainConfig) -> dict[str, Any]:

@@ -2,11 +2,14 @@
 
 A selector depends only on the `GainOracle` protocol (gain, commit, evaluated), never on how the Fisher blocks are
 made, and never changes training state: it returns a `Selection` and `train.py` moves the chosen views.
+Evaluations are counted in one place, the oracle (`evaluated`); a selector reports only its `conservative` count,
+which its own `conservative_count(m, k)` states in closed form.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import torch
 
@@ -26,20 +29,12 @@ class GainOracle(Protocol):
 
 
 @dataclass(frozen=True)
-class OracleCalls:
-    """Oracle accounting of one selection step."""
-
-    conservative: int  # every sampled candidate counts once per pick (the count the paper reports)
-    evaluated: int  # gains actually computed (lazy evaluation saves some)
-
-
-@dataclass(frozen=True)
 class Selection:
     """What a selector returns for one acquisition step."""
 
     ids: list[int]  # chosen view ids, in pick order
     gains: list[float]  # marginal gain of each pick when chosen (0.0 for selectors without an oracle)
-    oracle_calls: OracleCalls
+    conservative: int  # oracle count the paper reports: every candidate offered at every pick counts once
 
 
 @dataclass(frozen=True)
@@ -55,15 +50,27 @@ class SelectionContext:
 class Selector:
     """Base class: choose `k` of the candidates, committing each pick to `ctx.oracle` as it goes.
 
-    When k >= M (the number of candidates) every candidate is returned: the step is run with k = M, so the
-    picks come in selection order with their gains and the counts equal the closed forms for k = M.
+    A subclass sets `uses_oracle`, implements `select` and `conservative_count`, and is registered with
+    `@register_selector("name", config=OptionsDataclass)`; with a config it takes it as its one constructor argument.
+    Exact ties between gains go to the lowest view id. When k >= M (the number of candidates) every candidate is
+    returned: the step is run with k = M.
     """
 
     name: str = ""  # set by `register_selector`
     uses_oracle: bool = True  # False: `select` calls no gains (it still commits its picks when given an oracle)
+    config: Any = None  # the options dataclass instance, for selectors registered with one
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
+        """Choose min(k, M) views of `ctx.candidate_ids`."""
         raise NotImplementedError
+
+    def conservative_count(self, m: int, k: int) -> int:
+        """Closed-form conservative oracle count of one step choosing `k` of `m` candidates (what `select` reports)."""
+        raise NotImplementedError
+
+    def options(self) -> dict[str, Any]:
+        """The selector's options as a JSON-ready dict (empty without a config)."""
+        return dataclasses.asdict(self.config) if self.config is not None else {}
 
 
 def check_k(k: int) -> None:

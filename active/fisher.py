@@ -13,14 +13,16 @@ Approximation (as in the LiTe-GS paper, following FisherRF/POP-GS):
   brute-force `torch.autograd.functional.jacobian` of the rendered image.
 * Prior H_0 = sum over the training views of H_v plus a ridge (see `active.logdet.BlockInformation`).
 
-Modes: "cached" keeps each candidate's blocks for the stage (an oracle is then a batched log-det update);
+`FisherOracle.build(...)` returns the one object the selectors call (`gain`, `commit`, `evaluated`: the
+`GainOracle` protocol, by inheritance from `active.logdet.BlockGainOracle`); its `FisherViewBlocks` supplies the
+blocks. Modes: "cached" keeps each candidate's blocks for the stage (an oracle is then a batched log-det update);
 "streaming" keeps nothing and recomputes a view's blocks at every oracle (memory-lean). When the cache estimate
-exceeds the memory budget, cached mode falls back to streaming and says so once.
+exceeds the memory budget, or the device runs out of memory while caching, cached mode falls back to streaming and
+says so once.
 """
 from __future__ import annotations
 
 import logging
-import os
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -28,15 +30,14 @@ from dataclasses import dataclass, field
 import torch
 
 from active.logdet import BlockGainOracle, BlockInformation
-from gaussian_renderer import RasterSettings, project_gaussians, projection_jacobian
-from gaussian_renderer.fisher_partials import attribute_gram
+from gaussian_renderer import RasterSettings, attribute_gram, project_gaussians, projection_jacobian
 from gaussian_renderer.sh import sh_to_colors
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 
 log = logging.getLogger(__name__)
 
-PARAM_GROUPS = {
+FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian form its Fisher block
     "default": ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
     "full_sh": ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest"),
 }
@@ -56,7 +57,7 @@ def available_memory_bytes() -> int:
 
 def fisher_view_blocks(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
                        settings: RasterSettings, sigma: float = 1.0,
-                       param_groups: tuple[str, ...] = PARAM_GROUPS["default"]) -> torch.Tensor:
+                       param_groups: tuple[str, ...] = FISHER_PARAM_GROUPS["default"]) -> torch.Tensor:
     """Per-Gaussian Fisher blocks of one view, H_v,i = sigma^-2 J_proj,i^T G_i J_proj,i.
 
     Returns:
@@ -79,8 +80,8 @@ def fisher_view_blocks(gaussians: GaussianModel, camera: Camera, background: tor
 
 
 @dataclass
-class FisherOracle:
-    """Fisher blocks of the candidate views, the prior of the training views, and the counted gain oracle."""
+class FisherViewBlocks:
+    """Per-view Fisher blocks of one model: computed on demand, kept in an LRU cache (cached mode) or not (streaming)."""
 
     gaussians: GaussianModel
     cameras: list[Camera]
@@ -94,46 +95,34 @@ class FisherOracle:
     fisher_seconds: float = 0.0  # time spent computing blocks, prior included
     _cache: "OrderedDict[int, torch.Tensor]" = field(default_factory=OrderedDict)
     _seen: set = field(default_factory=set)
-    gain_oracle: BlockGainOracle | None = None
 
-    @classmethod
-    def build(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int], background: torch.Tensor,
-              settings: RasterSettings, *, sigma: float = 1.0, delta_rel: float = 1e-6, delta_abs: float = 1e-8,
-              param_groups: str = "default", mode: str = "cached", cache_mb: int = 0) -> "FisherOracle":
-        """Compute the prior from `train_views` and return an oracle over the other views of `cameras`."""
-        groups = PARAM_GROUPS[param_groups]
-        budget = cache_mb * (1 << 20) if cache_mb > 0 else available_memory_bytes() // 4
-        oracle = cls(gaussians, cameras, background, settings, sigma, groups, mode == "streaming", budget)
-        prior = None
+    def compute(self, view_id: int) -> torch.Tensor:
+        """The blocks of `cameras[view_id]`, timed, never cached. [N, P, P] float64"""
         t0 = time.perf_counter()
-        for v in train_views:
-            blocks = oracle._compute(v)
-            prior = blocks if prior is None else prior.add_(blocks)
-        oracle.fisher_seconds += time.perf_counter() - t0
-        if not oracle.streaming:
-            num_candidates = len(cameras) - len(train_views)
-            estimate = num_candidates * prior.numel() * prior.element_size()
-            if estimate > budget:
-                log.warning("Fisher cache would need %.0f MB for %d candidate views (budget %.0f MB, "
-                            "--fisher_cache_mb): switching to streaming mode", estimate / 2**20, num_candidates,
-                            budget / 2**20)
-                oracle.streaming = True
-        oracle.gain_oracle = BlockGainOracle(BlockInformation(prior, delta_rel=delta_rel, delta_abs=delta_abs),
-                                             oracle.view_blocks)
-        return oracle
+        blocks = fisher_view_blocks(self.gaussians, self.cameras[view_id], self.background, self.settings,
+                                    self.sigma, self.param_groups)
+        self.fisher_seconds += time.perf_counter() - t0
+        return blocks
 
-    def _compute(self, view_id: int) -> torch.Tensor:
-        return fisher_view_blocks(self.gaussians, self.cameras[view_id], self.background, self.settings, self.sigma,
-                                  self.param_groups)
+    def use_streaming(self, reason: str) -> None:
+        """Drop the cache and recompute from now on (logged once)."""
+        if not self.streaming:
+            log.warning("%s: switching the Fisher oracle to streaming mode", reason)
+        self.streaming = True
+        self._cache.clear()
 
-    def view_blocks(self, view_id: int) -> torch.Tensor:
+    def __call__(self, view_id: int) -> torch.Tensor:
         """Blocks of one candidate view (from the cache, or computed). [N, P, P]"""
         if view_id in self._cache:
             self._cache.move_to_end(view_id)
             return self._cache[view_id]
-        t0 = time.perf_counter()
-        blocks = self._compute(view_id)
-        self.fisher_seconds += time.perf_counter() - t0
+        try:
+            blocks = self.compute(view_id)
+        except torch.cuda.OutOfMemoryError:
+            if self.streaming or not self._cache:
+                raise
+            self.use_streaming(f"out of device memory with {len(self._cache)} views cached")
+            blocks = self.compute(view_id)
         if view_id not in self._seen:
             self._seen.add(view_id)
             self.views_computed += 1
@@ -143,3 +132,40 @@ class FisherOracle:
             while len(self._cache) > 1 and len(self._cache) * size > self.cache_bytes:
                 self._cache.popitem(last=False)
         return blocks
+
+
+class FisherOracle(BlockGainOracle):
+    """The counted Fisher gain oracle of one acquisition step: prior of the training views, blocks of the others."""
+
+    def __init__(self, information: BlockInformation, view_blocks: FisherViewBlocks):
+        super().__init__(information, view_blocks)
+        self.blocks = view_blocks
+
+    @property
+    def views_computed(self) -> int:
+        """Distinct candidate views whose blocks were computed."""
+        return self.blocks.views_computed
+
+    @property
+    def fisher_seconds(self) -> float:
+        """Seconds spent computing Fisher blocks, the prior included."""
+        return self.blocks.fisher_seconds
+
+    @classmethod
+    def build(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int], background: torch.Tensor,
+              settings: RasterSettings, *, sigma: float = 1.0, delta_rel: float = 1e-6, delta_abs: float = 1e-8,
+              param_groups: str = "default", mode: str = "cached", cache_mb: int = 0) -> "FisherOracle":
+        """Compute the prior from `train_views` and return an oracle over the other views of `cameras`."""
+        budget = cache_mb * (1 << 20) if cache_mb > 0 else available_memory_bytes() // 4
+        source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, FISHER_PARAM_GROUPS[param_groups],
+                                  mode == "streaming", budget)
+        prior = None
+        for v in train_views:
+            blocks = source.compute(v)
+            prior = blocks if prior is None else prior.add_(blocks)
+        num_candidates = len(cameras) - len(train_views)
+        estimate = num_candidates * prior.numel() * prior.element_size()
+        if not source.streaming and estimate > budget:
+            source.use_streaming(f"the Fisher cache would need {estimate / 2**20:.0f} MB for {num_candidates} "
+                                 f"candidate views (budget {budget / 2**20:.0f} MB, --fisher_cache_mb)")
+        return cls(BlockInformation(prior, delta_rel=delta_rel, delta_abs=delta_abs), source)

@@ -1,13 +1,16 @@
 """Selector registry: `@register_selector("name", config=Config)` at the definition site, `build_selector`.
 
-A selector with options declares them as a frozen dataclass (`config=`) whose `__post_init__` validates them;
-`build_selector(name, **options)` builds that config from the options and passes it to the selector's constructor.
-A selector without `config` takes no options.
+A selector with options declares them as a frozen dataclass (`config=`) whose fields carry a default and a
+`metadata={"help": ...}` line and whose `__post_init__` validates them. `build_selector(name, **options)` builds
+that config and passes it to the selector's constructor; a selector without `config` takes no options.
+The CLIs get one flag per option name (`selector_options_dataclass`): an option such as `--eps` reaches every
+selector that declares it through this one path and is validated once, by the selector's config.
 """
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable
+import typing
+from typing import Any, Callable, Mapping
 
 from active.base import Selector
 from utils.errors import UserError
@@ -16,13 +19,16 @@ _SELECTORS: dict[str, tuple[type[Selector], type | None]] = {}
 
 
 def register_selector(name: str, config: type | None = None) -> Callable[[type[Selector]], type[Selector]]:
-    """Class decorator registering a selector under `name` (a second registration of a name is refused)."""
+    """Class decorator registering a selector under `name` (a second registration of a name is refused, and so is
+    an option that another selector declares with a different type or default)."""
     if config is not None and not dataclasses.is_dataclass(config):
         raise TypeError(f"selector {name!r}: config must be a dataclass, got {config!r}")
 
     def decorate(cls: type[Selector]) -> type[Selector]:
         if name in _SELECTORS:
             raise ValueError(f"selector {name!r} is already registered by {_SELECTORS[name][0].__name__}")
+        if config is not None:
+            _check_shared_options(name, config)
         _SELECTORS[name] = (cls, config)
         cls.name = name
         return cls
@@ -49,6 +55,44 @@ def build_selector(name: str, **options: Any) -> Selector:
         raise UserError(f"selector {name!r} has no option {', '.join(unknown)}; "
                         f"valid options: {', '.join(valid) or 'none'}")
     return cls(config(**options)) if config is not None else cls()
+
+
+def build_selector_from(name: str, values: Mapping[str, Any]) -> Selector:
+    """`build_selector` with the options `name` accepts taken from `values` (e.g. every parsed selector flag)."""
+    return build_selector(name, **{option: values[option] for option in selector_options(name) if option in values})
+
+
+def selector_options_dataclass() -> type:
+    """A frozen dataclass with one field per option name over all registered selectors (for `add_config_args`);
+    each field's help names the selectors that use it."""
+    fields: dict[str, tuple[Any, dataclasses.Field, list[str]]] = {}
+    for name in list_selectors():
+        config = _SELECTORS[name][1]
+        if config is None:
+            continue
+        hints = typing.get_type_hints(config)
+        for f in dataclasses.fields(config):
+            fields.setdefault(f.name, (hints[f.name], f, []))[2].append(name)
+    spec = []
+    for option, (tp, f, users) in fields.items():
+        help_text = f"[{', '.join(users)}] {(f.metadata or {}).get('help', '')}".rstrip()
+        spec.append((option, tp, dataclasses.field(default=f.default, metadata={"help": help_text})))
+    options = dataclasses.make_dataclass("SelectorOptions", spec, frozen=True)
+    options.__doc__ = "Options declared by the selectors' own configs; a selector reads only those it declares."
+    return options
+
+
+def _check_shared_options(name: str, config: type) -> None:
+    hints = typing.get_type_hints(config)
+    for other, (_, other_config) in _SELECTORS.items():
+        if other_config is None:
+            continue
+        other_hints = typing.get_type_hints(other_config)
+        for f in dataclasses.fields(other_config):
+            mine = {g.name: g for g in dataclasses.fields(config)}.get(f.name)
+            if mine is not None and (hints[f.name] != other_hints[f.name] or mine.default != f.default):
+                raise ValueError(f"selector {name!r}: option {f.name!r} clashes with selector {other!r} "
+                                 "(same name, different type or default); rename it")
 
 
 def _lookup(name: str) -> tuple[type[Selector], type | None]:

@@ -48,7 +48,6 @@ class ActiveConfig:
     """Active view selection: which selector, the acquisition schedule and the Fisher oracle."""
 
     method: str = field(default="", metadata=_flag(None, "view selector; empty = train on all training views"))
-    eps: float = field(default=0.1, metadata=_flag(None, "lite_gs/ssg accuracy parameter, in (0, 1)"))
     num_init_views: int = field(default=2, metadata=_flag(None, "seed views (farthest-point sampling from view 0)"))
     init_views: tuple[int, ...] = field(default=(), metadata=_flag(None, "explicit seed view ids (overrides --num_init_views)"))
     views_per_step: int = field(default=3, metadata=_flag(None, "K: views added per acquisition step"))

@@ -1,16 +1,18 @@
-"""Selection cost: Fisher blocks vs a training step, one oracle, and pop_gs vs lite_gs over K and eps.
+"""Selection cost: Fisher blocks vs a training step, one oracle, and the oracle selectors over K and their options.
 
     python benchmarks/bench_selection.py --model output/quickstart --mode cached
-    python benchmarks/bench_selection.py --model output/quickstart --mode streaming --ks 3
-    python benchmarks/bench_selection.py --model output/quickstart --memory_table --ks 3
+    python benchmarks/bench_selection.py --model output/quickstart --mode streaming --ks 3 --methods pop_gs lite_gs
+    python benchmarks/bench_selection.py --model output/quickstart --memory_table --ks 3 --methods pop_gs
     python benchmarks/bench_selection.py --report benchmarks/results/selection_streaming_<date>.json
 
 Uses a trained model directory (default: the quickstart's) and its dataset; the seed views are chosen by
 farthest-point sampling (2 of the pool, so M = 98 candidates on the built-in scene). Modes:
   cached     every candidate's blocks are computed once (timed apart) and a gain is a batched log-det update;
   streaming  nothing is kept: every oracle recomputes that view's blocks (the memory-lean mode).
-Peak resident memory of the process is printed at the end. `--memory_table` runs pop_gs (first K of --ks) in
-both modes, each in its own process, for a growing number of candidates (--pool_sizes, the last = all) and prints
+Every selector that calls the oracle runs (or those of --methods), once per combination of the --sweep values of the
+options it declares (default eps = 0.1 0.3 0.6); ratios are taken to the row with the most evaluated oracles at the
+same K (exhaustive greedy when it runs). Peak resident memory of the process is printed at the end.
+`--memory_table` runs the first of --methods (first K of --ks) in both modes, each in its own process, for a growing number of candidates (--pool_sizes, the last = all) and prints
 the peak resident memory of each: cached grows with M, streaming stays flat.
 """
 from __future__ import annotations
@@ -29,16 +31,12 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import active  # noqa: E402,F401  (registers the selectors)
-from active.base import SelectionContext  # noqa: E402
+from active import SelectionContext, build_selector, list_selectors, selector_options  # noqa: E402
 from active.fisher import fisher_view_blocks  # noqa: E402
 from active.logdet import BlockGainOracle, BlockInformation  # noqa: E402
-from active.registry import build_selector  # noqa: E402
 from active.schedule import farthest_point_views  # noqa: E402
-from gaussian_renderer import RasterSettings, render  # noqa: E402
-from render import find_iteration, load_model_config  # noqa: E402
-from scene.gaussian_model import GaussianModel  # noqa: E402
-from scene.scene import Scene  # noqa: E402
+from gaussian_renderer import render  # noqa: E402
+from scene.trained import load_trained  # noqa: E402
 from utils.losses import l1_loss, ssim  # noqa: E402
 
 
@@ -59,13 +57,15 @@ def main() -> None:
     parser.add_argument("--model", default="output/quickstart", help="trained model directory")
     parser.add_argument("--mode", choices=("cached", "streaming"), default="cached")
     parser.add_argument("--ks", type=int, nargs="+", default=[3, 4, 6])
-    parser.add_argument("--eps", type=float, nargs="+", default=[0.1, 0.3, 0.6])
+    parser.add_argument("--sweep", nargs="+", default=["eps=0.1,0.3,0.6"],
+                        help="NAME=V1,V2,...: values of a selector option to run (for the selectors that declare it)")
     parser.add_argument("--num_init_views", type=int, default=2)
-    parser.add_argument("--methods", nargs="+", choices=("pop_gs", "lite_gs"), default=["pop_gs", "lite_gs"])
+    oracle_selectors = [name for name in list_selectors() if build_selector(name).uses_oracle]
+    parser.add_argument("--methods", nargs="+", choices=oracle_selectors, default=oracle_selectors)
     parser.add_argument("--num_candidates", type=int, default=0,
                         help="use only the first N candidates (0 = all); for peak-memory scaling")
     parser.add_argument("--memory_table", action="store_true",
-                        help="peak memory of pop_gs, cached vs streaming, over --pool_sizes (one process each)")
+                        help="peak memory of the first of --methods, cached vs streaming, over --pool_sizes (one process each)")
     parser.add_argument("--pool_sizes", type=int, nargs="+", default=[24, 48, 0], help="0 = all candidates")
     parser.add_argument("--json", type=Path, default=None, help="where to write the results (default: results/)")
     parser.add_argument("--report", type=Path, default=None, help="only print the table of a results JSON")
@@ -78,14 +78,8 @@ def main() -> None:
         return
 
     model_path = Path(args.model)
-    model_cfg, pipeline_cfg = load_model_config(model_path)
-    scene = Scene.load(model_cfg.source_path, model_path, white_background=model_cfg.white_background,
-                       resolution=model_cfg.resolution, eval=model_cfg.eval, images=model_cfg.images)
-    gaussians = GaussianModel.load_ply(model_path / "point_cloud" / f"iteration_{find_iteration(model_path, -1)}"
-                                       / "point_cloud.ply")
-    cams = scene.train_cameras
-    bg = torch.tensor([1.0] * 3 if model_cfg.white_background else [0.0] * 3)
-    settings = RasterSettings(tile_size=pipeline_cfg.tile_size)
+    trained = load_trained(model_path, device="cpu")
+    gaussians, cams, bg, settings = trained.gaussians, trained.scene.train_cameras, trained.background, trained.settings
     seeds = farthest_point_views(torch.stack([c.camera_center for c in cams]), args.num_init_views)
     candidates = [v for v in range(len(cams)) if v not in seeds]
     if args.num_candidates > 0:
@@ -122,10 +116,9 @@ def main() -> None:
         print(f"cache: {len(cache)} views, {cache_mb:.0f} MB, built in {t_cache:.1f} s")
 
     rows = []
-    configs = ([("pop_gs", None)] if "pop_gs" in args.methods else []) \
-        + ([("lite_gs", e) for e in args.eps] if "lite_gs" in args.methods else [])
+    configs = [(method, options) for method in args.methods for options in option_grid(method, args.sweep)]
     for k in args.ks:
-        for method, eps in configs:
+        for method, options in configs:
             computed = set()
 
             def provider(v):
@@ -135,9 +128,9 @@ def main() -> None:
             oracle = BlockGainOracle(BlockInformation(prior), provider)
             ctx = SelectionContext(candidates, oracle, torch.Generator().manual_seed(0), 0)
             t0 = time.perf_counter()
-            sel = build_selector(method, **({"eps": eps} if eps else {})).select(ctx, k)
-            rows.append({"K": k, "method": method, "eps": eps, "conservative": sel.oracle_calls.conservative,
-                         "evaluated": sel.oracle_calls.evaluated, "views_computed": len(computed),
+            sel = build_selector(method, **options).select(ctx, k)
+            rows.append({"K": k, "method": method, "options": options, "conservative": sel.conservative,
+                         "evaluated": oracle.evaluated, "views_computed": len(computed),
                          "select_s": time.perf_counter() - t0})
     print(f"\n{args.mode} mode{' (cache build excluded, see above)' if cache else ''}")
     print_rows(rows)
@@ -153,17 +146,28 @@ def main() -> None:
     print(f"wrote {out}")
 
 
+def option_grid(method: str, sweep: list[str]) -> list[dict]:
+    """Every combination of the --sweep values of the options `method` declares ([{}] when it declares none)."""
+    grid: list[dict] = [{}]
+    for item in sweep:
+        name, _, values = item.partition("=")
+        if name in selector_options(method):
+            grid = [{**g, name: float(v)} for g in grid for v in values.split(",")]
+    return grid
+
+
 def print_rows(rows: list[dict]) -> None:
-    """The selection table: counts, wall time, both ratios to pop_gs at the same K and the time per evaluated
-    oracle; then the time per evaluated oracle summed over all rows of each method (per-view Fisher cost varies,
-    so single cells scatter around the oracle ratio; the totals show whether overhead eats the savings)."""
-    print(f"{'K':>2} {'method':8} {'eps':>4} {'conserv.':>8} {'evaluated':>9} {'views':>5} {'select s':>9} "
-          f"{'time/pop':>8} {'evals/pop':>9} {'s/eval':>7}")
+    """The selection table: counts, wall time, both ratios to the row with the most evaluated oracles at the same K
+    (exhaustive greedy when it ran) and the time per evaluated oracle; then the time per evaluated oracle summed
+    over all rows of each method (per-view Fisher cost varies, so single cells scatter around the oracle ratio;
+    the totals show whether overhead eats the savings)."""
+    print(f"{'K':>2} {'method':8} {'options':>9} {'conserv.':>8} {'evaluated':>9} {'views':>5} {'select s':>9} "
+          f"{'time/max':>8} {'evals/max':>9} {'s/eval':>7}")
     for r in rows:
-        pop = next((p for p in rows if p["K"] == r["K"] and p["method"] == "pop_gs"), None)
-        ratios = (f"{r['select_s'] / pop['select_s']:8.3f} {r['evaluated'] / pop['evaluated']:9.3f}" if pop
-                  else f"{'-':>8} {'-':>9}")
-        print(f"{r['K']:2d} {r['method']:8} {'' if r['eps'] is None else r['eps']:>4} {r['conservative']:8d} "
+        ref = max((p for p in rows if p["K"] == r["K"]), key=lambda p: p["evaluated"])
+        ratios = f"{r['select_s'] / ref['select_s']:8.3f} {r['evaluated'] / max(1, ref['evaluated']):9.3f}"
+        options = " ".join(f"{n}={v:g}" for n, v in r.get("options", {}).items())
+        print(f"{r['K']:2d} {r['method']:8} {options:>9} {r['conservative']:8d} "
               f"{r['evaluated']:9d} {r['views_computed']:5d} {r['select_s']:9.2f} {ratios} "
               f"{r['select_s'] / max(1, r['evaluated']):7.3f}")
     for method in dict.fromkeys(r["method"] for r in rows):
@@ -184,18 +188,18 @@ def report(path: Path) -> None:
 
 
 def memory_table(args: argparse.Namespace) -> None:
-    """Peak RSS of pop_gs in cached and streaming mode over growing pools, one child process per cell."""
-    k = args.ks[0]
+    """Peak RSS of the first of --methods in cached and streaming mode over growing pools, one child process per cell."""
+    k, method = args.ks[0], args.methods[0]
     RESULTS_DIR.mkdir(exist_ok=True)
     stamp = time.strftime("%Y%m%d_%H%M%S")
-    print(f"pop_gs, K = {k}: peak resident memory of one process per cell")
+    print(f"{method}, K = {k}: peak resident memory of one process per cell")
     print(f"{'M':>4} {'mode':9} {'cache MB':>8} {'peak RSS MB':>11} {'select s':>9}")
     table = []
     for pool in args.pool_sizes:
         for mode in ("cached", "streaming"):
             out = RESULTS_DIR / f"memory_{stamp}_{mode}_{pool}.json"
             cmd = [sys.executable, __file__, "--model", str(args.model), "--mode", mode, "--ks", str(k),
-                   "--methods", "pop_gs", "--num_init_views", str(args.num_init_views),
+                   "--methods", method, "--num_init_views", str(args.num_init_views),
                    "--num_candidates", str(pool), "--json", str(out)]
             subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
             res = json.loads(out.read_text())
@@ -205,7 +209,8 @@ def memory_table(args: argparse.Namespace) -> None:
             print(f"{row['M']:4d} {mode:9} {row['cache_mb']:8.0f} {row['peak_rss_mb']:11.0f} {row['select_s']:9.1f}",
                   flush=True)
     summary = RESULTS_DIR / f"memory_{stamp}.json"
-    summary.write_text(json.dumps({"machine": platform.platform(), "model": str(args.model), "K": k, "rows": table},
+    summary.write_text(json.dumps({"machine": platform.platform(), "model": str(args.model), "K": k,
+                                   "method": method, "rows": table},
                                   indent=2))
     print(f"wrote {summary}")
 

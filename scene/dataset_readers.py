@@ -148,8 +148,12 @@ def _blender_c2w(frame: dict, where: str) -> torch.Tensor:
         c2w = torch.tensor(frame["transform_matrix"], dtype=torch.float64)
     except (TypeError, ValueError):
         raise UserError(f"{where}: 'transform_matrix' is not a 4x4 list of numbers") from None
-    if c2w.shape != (4, 4) or not torch.isfinite(c2w).all():
-        raise UserError(f"{where}: 'transform_matrix' must be a finite 4x4 matrix, got shape {tuple(c2w.shape)}")
+    if c2w.shape != (4, 4):
+        raise UserError(f"{where}: 'transform_matrix' must be a 4x4 matrix, got shape {tuple(c2w.shape)}")
+    if not torch.isfinite(c2w).all():
+        row, col = (int(i) for i in torch.nonzero(~torch.isfinite(c2w))[0])
+        raise UserError(f"{where}: 'transform_matrix' holds a non-finite value ({float(c2w[row, col])}) at row {row}, "
+                        f"column {col}; fix the pose")
     if abs(float(torch.linalg.det(c2w[:3, :3]))) < 1e-9:
         raise UserError(f"{where}: 'transform_matrix' has a singular rotation part; fix the pose")
     return c2w

@@ -1,7 +1,8 @@
 """Plots of experiment runs (matplotlib, Agg backend): test PSNR vs views, oracle evaluations vs K, the eps
 trade-off, and the cameras each method chose. Each function takes the `Run` records of scripts/summarize.py
-(attributes: setup, scene, method, k, eps, seed, setting, stages, final, results, cameras), writes one PNG and
-returns its path, or returns None when the runs hold nothing to plot."""
+(attributes: setup, scene, method, k, options, options_label, seed, setting, stages, final, results, cameras),
+writes one PNG and returns its path, or returns None when the runs hold nothing to plot. No selector names here:
+series are labelled by method and options as the runs record them."""
 from __future__ import annotations
 
 import math
@@ -66,11 +67,12 @@ def psnr_vs_views(runs, path: Path) -> Path | None:
 
 
 def oracles_vs_k(runs, path: Path) -> Path | None:
-    """Conservative oracle evaluations per step against K: pop_gs grows with K, lite_gs (one line per eps) not."""
+    """Conservative oracle evaluations per step against K, one line per (method, options) that calls the oracle and
+    was run at two or more K (exhaustive greedy grows with K, the stochastic selectors do not)."""
     groups: dict[str, dict[int, list]] = defaultdict(lambda: defaultdict(list))
     for r in runs:
-        if r.method in ("pop_gs", "lite_gs") and r.stages:
-            groups[r.method if r.method == "pop_gs" else f"lite_gs eps={r.eps:g}"][r.k].append(r)
+        if any(s.get("oracle_calls", {}).get("conservative") for s in r.stages):
+            groups[f"{r.method} {r.options_label}".strip()][r.k].append(r)
     series = {label: {k: _per_step(rs) for k, rs in by_k.items()} for label, by_k in groups.items()}
     series = {label: pts for label, pts in series.items() if len(pts) > 1}
     if not series:
@@ -79,18 +81,19 @@ def oracles_vs_k(runs, path: Path) -> Path | None:
 
 
 def eps_tradeoff(runs, path: Path) -> Path | None:
-    """lite_gs / ssg: conservative oracle evaluations per step against mean final test PSNR, one point per
-    (method, K, eps), annotated with eps; needs at least two eps values."""
+    """Selectors with an `eps` option: conservative oracle evaluations per step against mean final test PSNR, one
+    point per (method, K, eps), annotated with eps; needs at least two eps values."""
     groups: dict[tuple, list] = defaultdict(list)
     for r in runs:
-        if r.method in ("lite_gs", "ssg") and r.results is not None and r.stages:
-            groups[(r.method, r.k, r.eps)].append(r)
+        if "eps" in r.options and r.results is not None and r.stages:
+            groups[(r.method, r.k, float(r.options["eps"]))].append(r)
     if len({key[2] for key in groups}) < 2:
         return None
+    markers = dict(zip(sorted({key[0] for key in groups}), "os^Dvp*"))
     fig, ax = plt.subplots(figsize=(5.5, 4))
     for (method, k, eps), group in sorted(groups.items()):
         x, y = _per_step(group), mean(float(r.results["PSNR"]) for r in group)
-        ax.scatter([x], [y], marker="o" if method == "lite_gs" else "s", label=f"{method} K={k} eps={eps:g}")
+        ax.scatter([x], [y], marker=markers.get(method, "o"), label=f"{method} K={k} eps={eps:g}")
         ax.annotate(f"{eps:g}", (x, y), textcoords="offset points", xytext=(4, 4), fontsize=8)
     _label_axes(ax, "oracle evaluations per step (conservative)", "test PSNR (dB)", "eps trade-off", 7)
     return _save(fig, path)

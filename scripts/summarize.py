@@ -3,8 +3,10 @@
     python scripts/summarize.py output/experiments/setup1 [more roots...] [--out DIR]
 
 A run is a model directory holding selection.json, run_status.json or cfg_args. Its setup and scene come from the
-layout the experiment scripts write (OUT/<setup>/<scene>/<tag>/seed<S>); its method, K, eps and seed from
-selection.json (or cfg_args before the first acquisition step). A run without results.json is listed as incomplete.
+layout the experiment scripts write (OUT/<setup>/<scene>/<tag>/seed<S>); its method, K, selector options (e.g. eps)
+and seed from selection.json (or cfg_args before the first acquisition step). A run without results.json is listed
+as incomplete. Nothing here knows selector names: a method's setting is its name, K and the options its
+selection.json records.
 """
 from __future__ import annotations
 
@@ -27,7 +29,6 @@ from utils.io import atomic_write  # noqa: E402
 
 log = logging.getLogger("summarize")
 MARKERS = ("selection.json", "run_status.json", "cfg_args")  # any of these makes a directory a run
-EPS_METHODS = ("lite_gs", "ssg")  # methods whose behaviour depends on eps
 
 
 @dataclass
@@ -38,7 +39,7 @@ class Run:
     scene: str
     method: str
     k: int
-    eps: float
+    options: dict  # the selector's own options, as selection.json records them (e.g. {"eps": 0.1})
     seed: int
     stages: list[dict] = field(default_factory=list)  # selection.json "stages"
     final: dict | None = None  # selection.json "final" (train_views, test_psnr after the last stage)
@@ -47,10 +48,15 @@ class Run:
     problem: str = ""  # why the run has no results yet ("" when complete)
 
     @property
+    def options_label(self) -> str:
+        """The selector options as 'name=value' words ('' for a selector without options)."""
+        return " ".join(f"{name}={value:g}" if isinstance(value, float) else f"{name}={value}"
+                        for name, value in sorted(self.options.items()))
+
+    @property
     def setting(self) -> str:
-        """Method label with the settings that vary within a setup (K always, eps for eps-dependent methods)."""
-        label = f"{self.method} K={self.k}"
-        return label + (f" eps={self.eps:g}" if self.method in EPS_METHODS else "")
+        """Method label with the settings that vary within a setup: K and the selector's options."""
+        return " ".join(part for part in (self.method, f"K={self.k}", self.options_label) if part)
 
 
 def _read_json(path: Path):
@@ -82,8 +88,9 @@ def load_run(model: Path) -> Run:
         cfg = {**cfg_args.get("active", {}), **cfg_args.get("run", {})}
     else:
         cfg = {}
+    options = cfg.get("selector_options")
     run = Run(model, setup, scene, str(cfg.get("method") or "?"), int(cfg.get("views_per_step", 0)),
-              float(cfg.get("eps", math.nan)), int(cfg.get("seed", -1)))
+              options if isinstance(options, dict) else {}, int(cfg.get("seed", -1)))
     if isinstance(sel, dict):
         run.stages = [s for s in sel.get("stages", []) if isinstance(s, dict)]
         run.final = sel.get("final")
@@ -151,24 +158,29 @@ def quality_rows(runs: list[Run]) -> list[dict]:
     return rows
 
 
+def exhaustive_count(stage: dict) -> int:
+    """What exhaustive greedy (every remaining candidate at every pick) evaluates in a step: sum_{j<k} (M - j)."""
+    m, k = int(stage.get("candidates", 0)), len(stage.get("selected", []))
+    return sum(m - j for j in range(k))
+
+
 def oracle_rows(runs: list[Run]) -> list[dict]:
-    """Setup x scene x K x (method, eps): oracle evaluations per step and the reduction relative to pop_gs."""
+    """Setup x scene x K x (method, options): oracle evaluations per step and the reduction relative to exhaustive
+    greedy on the same steps (sum_j (M - j) per step, averaged and rounded up like the counts)."""
     groups: dict[tuple, dict[tuple, list[Run]]] = defaultdict(lambda: defaultdict(list))
     for r in runs:
-        if r.method != "random" and r.stages:
-            groups[(r.setup, r.scene, r.k)][(r.method, r.eps if r.method in EPS_METHODS else None)].append(r)
+        if any(s.get("oracle_calls", {}).get("conservative") for s in r.stages):
+            groups[(r.setup, r.scene, r.k)][(r.method, r.options_label)].append(r)
     rows = []
     for (setup, scene, k), by_method in sorted(groups.items()):
-        pop = by_method.get(("pop_gs", None), [])
-        pop_count = per_step_count(pop, "conservative")
-        for (method, eps), group in sorted(by_method.items(), key=lambda kv: (kv[0][0], kv[0][1] or 0.0)):
+        for (method, options), group in sorted(by_method.items()):
             cons, evaluated = per_step_count(group, "conservative"), per_step_count(group, "evaluated")
-            reduction = (100.0 * (1.0 - cons / pop_count) if pop_count and method != "pop_gs" and cons is not None
-                         else None)
-            rows.append({"setup": setup, "scene": scene, "K": k, "method": method,
-                         "eps": "" if eps is None else f"{eps:g}", "runs": len(group),
-                         "steps": sum(len(r.stages) for r in group), "conservative": cons,
-                         "evaluated": evaluated, "reduction_%": reduction})
+            steps = [exhaustive_count(s) for r in group for s in r.stages if "oracle_calls" in s]
+            exhaustive = math.ceil(sum(steps) / len(steps)) if steps else None
+            reduction = 100.0 * (1.0 - cons / exhaustive) if exhaustive and cons is not None else None
+            rows.append({"setup": setup, "scene": scene, "K": k, "method": method, "options": options,
+                         "runs": len(group), "steps": sum(len(r.stages) for r in group), "conservative": cons,
+                         "evaluated": evaluated, "exhaustive": exhaustive, "reduction_%": reduction})
     return rows
 
 
@@ -230,7 +242,8 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
           "## Quality on the test views", "", markdown_table(quality, digits),
           "## Oracle evaluations per acquisition step", "",
           "Averaged over steps (and seeds), rounded up, as the paper reports. conservative: every sampled candidate "
-          "counts; evaluated: gains actually computed. reduction: conservative count relative to pop_gs.", "",
+          "counts; evaluated: gains actually computed. exhaustive: what exhaustive greedy evaluates on the "
+          "same steps, sum_j (M - j); reduction: conservative count relative to it.", "",
           markdown_table(oracles, digits),
           "## Selection wall time (seconds)", "",
           "select_s = selection time per acquisition step including the Fisher blocks; fisher_s = the Fisher part.",

@@ -6,6 +6,7 @@ import torch
 from active import build_selector
 from active.base import SelectionContext
 from active.fisher import FisherOracle, fisher_view_blocks
+from active.logdet import BlockInformation
 from gaussian_renderer import RasterSettings, rasterization
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
@@ -35,10 +36,12 @@ def cameras(count=6):
     return out
 
 
-def test_view_blocks_equal_bruteforce_jacobian():
-    model, cam = tiny_model(), cameras()[1]
-    names = ["means", "quats", "log_scales", "logit_opacities", "sh_dc"]
+NAMES = ["means", "quats", "log_scales", "logit_opacities", "sh_dc"]
 
+
+def bruteforce_blocks(model, cam, sigma=1.0):
+    """sigma^-2 J_i^T J_i per Gaussian from the full autograd Jacobian of the rendered image (every pixel and
+    channel w.r.t. every raw parameter), its per-Gaussian diagonal blocks. [N, 14, 14]"""
     sh_rest = model.params["sh_rest"].detach()
 
     def image(means, quats, log_scales, logit_opacities, sh_dc):  # the model's activations, written out
@@ -46,11 +49,16 @@ def test_view_blocks_equal_bruteforce_jacobian():
                              torch.cat([sh_dc, sh_rest], dim=1), cam.viewmat, cam.intrinsics, W, H, sh_degree=1,
                              background=BG, settings=SETTINGS).image
 
-    jac = torch.autograd.functional.jacobian(image, tuple(model.params[k].detach() for k in names))
+    jac = torch.autograd.functional.jacobian(image, tuple(model.params[k].detach() for k in NAMES))
     n = model.num_gaussians
     j = torch.cat([jac[0].reshape(-1, n, 3), jac[1].reshape(-1, n, 4), jac[2].reshape(-1, n, 3),
-                   jac[3].reshape(-1, n, 1), jac[4].reshape(-1, n, 3)], dim=2)
-    expected = torch.einsum("mip,miq->ipq", j, j) / 0.5**2
+                   jac[3].reshape(-1, n, 1), jac[4].reshape(-1, n, 3)], dim=2)  # [pixels x channels, N, 14]
+    return torch.einsum("mip,miq->ipq", j, j) / sigma**2
+
+
+def test_view_blocks_equal_bruteforce_jacobian():
+    model, cam = tiny_model(), cameras()[1]
+    expected = bruteforce_blocks(model, cam, sigma=0.5)
     blocks = fisher_view_blocks(model, cam, BG, SETTINGS, sigma=0.5)
     assert expected.abs().max() > 1e-3
     torch.testing.assert_close(blocks, expected, rtol=1e-4, atol=1e-4 * expected.abs().max().item())
@@ -61,16 +69,56 @@ def test_view_blocks_equal_bruteforce_jacobian():
 
 def select(model, mode, method="pop_gs", k=2, **options):
     oracle = FisherOracle.build(model, cameras(), [0, 3], BG, SETTINGS, mode=mode)
-    ctx = SelectionContext([1, 2, 4, 5], oracle.gain_oracle, torch.Generator().manual_seed(0), 0)
+    ctx = SelectionContext([1, 2, 4, 5], oracle, torch.Generator().manual_seed(0), 0)
     return build_selector(method, **options).select(ctx, k), oracle
 
 
-def test_cached_and_streaming_agree():
+def dense_greedy(blocks, prior, candidates, k):
+    """Plain greedy on dense log-dets of the block-diagonal matrices, ties to the lowest id. -> (ids, gains)"""
+    a = torch.block_diag(*BlockInformation(prior).matrix)  # the prior with the oracle's ridge
+    ids, gains = [], []
+    for _ in range(k):
+        rest = [v for v in candidates if v not in ids]
+        values = [float(torch.logdet(a + torch.block_diag(*blocks[v])) - torch.logdet(a)) for v in rest]
+        best = max(range(len(rest)), key=lambda i: (values[i], -rest[i]))
+        ids.append(rest[best])
+        gains.append(values[best])
+        a = a + torch.block_diag(*blocks[rest[best]])
+    return ids, gains
+
+
+def test_cached_and_streaming_equal_greedy_on_bruteforce_blocks():
     model = tiny_model(seed=2)
-    cached, oc = select(model, "cached")
-    streaming, os_ = select(model, "streaming")
-    assert cached.ids == streaming.ids and cached.gains == streaming.gains
-    assert oc.views_computed == os_.views_computed == 4
+    blocks = [bruteforce_blocks(model, cam) for cam in cameras()]
+    ids, gains = dense_greedy(blocks, blocks[0] + blocks[3], [1, 2, 4, 5], 2)
+    for mode in ("cached", "streaming"):
+        sel, oracle = select(model, mode)
+        assert sel.ids == ids, mode
+        torch.testing.assert_close(torch.tensor(sel.gains), torch.tensor(gains), rtol=1e-4, atol=1e-6)
+        assert oracle.views_computed == 4 and oracle.evaluated == sel.conservative == 4 + 3
+    # The one object is the oracle: its counts and statistics live on it, nothing else is assigned after build.
+    assert oracle.fisher_seconds > 0
+
+
+def test_out_of_memory_while_caching_falls_back_to_streaming(monkeypatch, caplog):
+    model = tiny_model(seed=2)
+    oracle = FisherOracle.build(model, cameras(), [0, 3], BG, SETTINGS, mode="cached")
+    reference, _ = select(model, "cached")
+    compute = oracle.blocks.compute
+    failed = []
+
+    def compute_once_out_of_memory(view_id):
+        if len(oracle.blocks._cache) == 2 and not failed:  # the third view does not fit on the device
+            failed.append(view_id)
+            raise torch.cuda.OutOfMemoryError("CUDA out of memory (simulated)")
+        return compute(view_id)
+
+    monkeypatch.setattr(oracle.blocks, "compute", compute_once_out_of_memory)
+    ctx = SelectionContext([1, 2, 4, 5], oracle, torch.Generator().manual_seed(0), 0)
+    sel = build_selector("pop_gs").select(ctx, 2)
+    assert failed and oracle.blocks.streaming and not oracle.blocks._cache
+    assert "switching the Fisher oracle to streaming mode" in caplog.text
+    assert sel.ids == reference.ids
 
 
 def test_singular_scene_gives_valid_choice_without_nan():

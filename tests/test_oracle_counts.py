@@ -1,16 +1,46 @@
-"""Oracle accounting: the closed forms reproduce the published table, match literal sums, and the selectors count
-exactly that."""
+"""Oracle accounting: every selector's closed form equals the formulas written out here (independently of the
+selectors' helpers), reproduces the published table, and is exactly what the selector reports at run time; the
+evaluated count comes from the oracle and never exceeds it."""
 import math
 
 import pytest
 import torch
 
-from active import build_selector
+from active import build_selector, list_selectors
 from active.base import SelectionContext
 from active.logdet import BlockGainOracle, BlockInformation
-from active.oracle_counts import conservative_count, mean_rounded_up, schedule_counts, subset_size
+from active.oracle_counts import mean_rounded_up, schedule_counts
 from tests.test_logdet import random_blocks, single_thread  # noqa: F401  (autouse fixture)
 from utils.errors import UserError
+
+
+def exhaustive(m: int, k: int) -> int:
+    """pop_gs: every remaining candidate at every pick."""
+    return sum(m - j for j in range(min(k, m)))
+
+
+def stochastic(m: int, k: int, eps: float) -> int:
+    """lite_gs: p_j = max(1, floor((M - j) ln(1/eps) / K)), never more than the M - j left."""
+    k = min(k, m)
+    return sum(min(m - j, max(1, math.floor((m - j) * math.log(1 / eps) / k))) for j in range(k))
+
+
+def static_subset(m: int, k: int, eps: float) -> int:
+    """ssg: one subset of p = max(K, floor(M ln(1/eps) / K)) (at most M), shrinking by one per pick."""
+    k = min(k, m)
+    if k == 0:
+        return 0
+    p = min(m, max(k, math.floor(m * math.log(1 / eps) / k)))
+    return sum(p - j for j in range(k))
+
+
+FORMULAS = {"pop_gs": lambda m, k, eps: exhaustive(m, k), "lite_gs": stochastic, "ssg": static_subset,
+            "random": lambda m, k, eps: 0}
+
+
+def selector(method: str, eps: float):
+    return build_selector(method, eps=eps) if method in ("lite_gs", "ssg") else build_selector(method)
+
 
 # (method, seed views, K, view budget, eps, published per-step conservative count), pool of 100 views
 PUBLISHED = [
@@ -25,56 +55,58 @@ PUBLISHED = [
 
 @pytest.mark.parametrize("method, n0, k, vmax, eps, expected", PUBLISHED)
 def test_published_table(method, n0, k, vmax, eps, expected):
-    assert mean_rounded_up(schedule_counts(method, 100, n0, k, vmax, eps)) == expected
+    assert mean_rounded_up(schedule_counts(selector(method, eps), 100, n0, k, vmax)) == expected
 
 
-def test_closed_forms_equal_literal_sums():
-    # Setup 1, first step: M = 98 candidates, K = 3.
-    assert conservative_count("pop_gs", 98, 3) == 98 + 97 + 96
-    c = math.log(10.0)
-    assert conservative_count("lite_gs", 98, 3, 0.1) == sum(math.floor((98 - j) * c / 3) for j in range(3))
-    p = math.floor(98 * c / 3)
-    assert conservative_count("ssg", 98, 3, 0.1) == p + (p - 1) + (p - 2)
-    assert conservative_count("random", 98, 3) == 0
-    assert schedule_counts("pop_gs", 100, 2, 3, 11) == [291, 282, 273]
-    assert schedule_counts("pop_gs", 20, 3, 4, 12) == [17 + 16 + 15 + 14, 13 + 12 + 11 + 10, 9]  # remainder step
-    assert conservative_count("pop_gs", 4, 10) == 4 + 3 + 2 + 1  # K >= M: all M chosen
+def test_every_selector_has_a_formula_here():
+    assert set(FORMULAS) >= set(list_selectors()) - {"_test_dummy"}
+
+
+@pytest.mark.parametrize("method", sorted(FORMULAS))
+@pytest.mark.parametrize("eps", [0.01, 0.1, 0.3, 0.6, 0.95])
+def test_closed_forms_equal_the_written_out_formulas(method, eps):
+    sel = selector(method, eps)
+    for m in range(0, 120, 7):
+        for k in (1, 2, 3, 4, 6, 10, 130):
+            assert sel.conservative_count(m, k) == FORMULAS[method](m, k, eps), (m, k)
+
+
+def test_literal_sums_and_schedule():
+    # Setup 1, first step: M = 98 candidates, K = 3; ln 10 / 3 * 98 = 75.2
+    assert build_selector("pop_gs").conservative_count(98, 3) == 98 + 97 + 96
+    assert build_selector("lite_gs", eps=0.1).conservative_count(98, 3) == 75 + 74 + 73
+    assert build_selector("ssg", eps=0.1).conservative_count(98, 3) == 75 + 74 + 73
+    assert build_selector("random").conservative_count(98, 3) == 0
+    assert schedule_counts(build_selector("pop_gs"), 100, 2, 3, 11) == [291, 282, 273]
+    assert schedule_counts(build_selector("pop_gs"), 20, 3, 4, 12) == [17 + 16 + 15 + 14, 13 + 12 + 11 + 10, 9]
+    assert build_selector("pop_gs").conservative_count(4, 10) == 4 + 3 + 2 + 1  # K >= M: all M chosen
     with pytest.raises(UserError, match="eps"):
-        conservative_count("lite_gs", 98, 3, 1.0)
-    with pytest.raises(ValueError, match="no closed-form"):
-        conservative_count("nope", 98, 3)
-
-
-def test_subset_size_rule():
-    assert subset_size(98, 3, 0.1) == 75  # floor(98 ln 10 / 3) = floor(75.2)
-    assert subset_size(5, 1, 0.01) == 5  # capped at the remaining candidates
-    assert subset_size(10, 6, 0.99) == 1  # at least one
+        build_selector("lite_gs", eps=1.0)
 
 
 def test_lite_gs_count_does_not_grow_with_k():
     for m in range(20, 300):
-        lite = [conservative_count("lite_gs", m, k, 0.1) for k in (3, 4, 6)]
+        lite = [stochastic(m, k, 0.1) for k in (3, 4, 6)]
         assert lite[0] >= lite[1] >= lite[2]
-        pop = [conservative_count("pop_gs", m, k) for k in (3, 4, 6)]
+        pop = [exhaustive(m, k) for k in (3, 4, 6)]
         assert pop[0] < pop[1] < pop[2]
-    # For every eps, without the max(1, .) floor the count is bounded by M ln(1/eps) whatever K (floors only
-    # remove): sum_j floor((M - j) ln(1/eps) / K) <= K * M ln(1/eps) / K.
-    for eps in (0.1, 0.3, 0.6):
+    for eps in (0.1, 0.3, 0.6):  # without the max(1, .) floor the count is at most M ln(1/eps) whatever K
         for m in range(30, 300, 7):
             for k in (3, 4, 6):
-                assert conservative_count("lite_gs", m, k, eps) <= m * math.log(1 / eps)
+                assert stochastic(m, k, eps) <= m * math.log(1 / eps)
 
 
-@pytest.mark.parametrize("method", ["pop_gs", "lite_gs", "ssg", "random"])
+@pytest.mark.parametrize("method", sorted(FORMULAS))
 @pytest.mark.parametrize("k", [3, 4, 6])
 @pytest.mark.parametrize("eps", [0.1, 0.3, 0.6])
-def test_selector_counts_equal_closed_form(method, k, eps):
+def test_selector_reports_the_formula_and_the_oracle_counts_evaluations(method, k, eps):
     m = 40
     blocks = random_blocks(m + 1, 3, 2, seed=k)
     oracle = BlockGainOracle(BlockInformation(blocks[0]), lambda v: blocks[v + 1])
-    options = {"eps": eps} if method in ("lite_gs", "ssg") else {}
     ctx = SelectionContext(list(range(m)), oracle, torch.Generator().manual_seed(0), 0)
-    sel = build_selector(method, **options).select(ctx, k)
-    assert sel.oracle_calls.conservative == conservative_count(method, m, k, eps)
-    assert sel.oracle_calls.evaluated == oracle.evaluated <= sel.oracle_calls.conservative
+    sel = selector(method, eps).select(ctx, k)
+    assert sel.conservative == FORMULAS[method](m, k, eps)
+    assert oracle.evaluated <= sel.conservative
+    if method == "pop_gs":
+        assert oracle.evaluated == sel.conservative
     assert len(set(sel.ids)) == len(sel.ids) == k

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from active.oracle_counts import mean_rounded_up, schedule_counts, step_count
+from active import build_selector
+from active.oracle_counts import mean_rounded_up, schedule_counts
 from tests.conftest import ROOT
 
 POOL = 20  # training views of the fake scenes
@@ -34,22 +35,29 @@ model = Path(a.m)
 if Path(args[0]).name == "train.py":
     if str(model) in os.environ.get("FAKE_FAIL", "").split(":"):
         sys.exit(1)
-    import importlib.util  # oracle_counts.py alone: the active package would import torch
-    spec = importlib.util.spec_from_file_location("oc", "{root}/active/oracle_counts.py")
-    oc = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(oc)
+    import math  # closed-form counts written out here (importing the active package would import torch)
+    def step_count(method, m, k, eps):
+        if method == "pop_gs":
+            return sum(m - j for j in range(k))
+        if method == "lite_gs":
+            return sum(min(m - j, max(1, math.floor((m - j) * math.log(1 / eps) / k))) for j in range(k))
+        if method == "ssg":
+            p = min(m, max(k, math.floor(m * math.log(1 / eps) / k)))
+            return sum(p - j for j in range(k))
+        return 0
     n0, k, vmax, eps = int(a.num_init_views), int(a.views_per_step), int(a.max_views), float(a.eps)
     views, stages = list(range(n0)), []
     while len(views) < vmax:
         step = min(k, vmax - len(views))
-        count = oc.step_count(a.method, {pool} - len(views), step, eps)
+        count = step_count(a.method, {pool} - len(views), step, eps)
         stages.append({{"train_views": list(views), "candidates": {pool} - len(views),
                        "selected": list(range(len(views), len(views) + step)), "test_psnr": 10.0,
                        "oracle_calls": {{"conservative": count, "evaluated": count}},
                        "fisher_seconds": 0.0, "select_seconds": 0.0}})
         views += stages[-1]["selected"]
     model.mkdir(parents=True, exist_ok=True)
-    (model / "selection.json").write_text(json.dumps({{"config": {{"method": a.method, "eps": eps,
+    options = {{"eps": eps}} if a.method in ("lite_gs", "ssg") else {{}}
+    (model / "selection.json").write_text(json.dumps({{"config": {{"method": a.method, "selector_options": options,
         "views_per_step": k, "seed": int(a.seed)}}, "stages": stages}}))
     (model / "run_status.json").write_text('{{"status": "complete"}}')
 elif Path(args[0]).name == "metrics.py":
@@ -126,7 +134,7 @@ def test_setup4_layout_scaling_skip_resume_and_failure(fake, tmp_path):
         assert option(c, "--eps") == (tag.split("eps")[1] if "eps" in tag else "0.1")
     md = (out / "setup4" / "summary.md").read_text()
     for k in (3, 4, 6):
-        pop = mean_rounded_up(schedule_counts("pop_gs", POOL, 3, k, 15))
+        pop = mean_rounded_up(schedule_counts(build_selector("pop_gs"), POOL, 3, k, 15))
         assert f"| setup4 | ship | {k} | pop_gs |  | 2 |" in md and f"| {pop} | {pop} |" in md
 
     # Rerun: finished runs are skipped, an unfinished one (no results.json) is resumed, and a failing one does
@@ -181,7 +189,7 @@ def test_miniature_setup1_end_to_end(tiny_scene, tmp_path):
     sel = json.loads((out / "setup1" / tiny_scene.name / "pop_gs" / "seed0" / "selection.json").read_text())
     for stage in sel["stages"]:
         m = stage["candidates"]
-        assert stage["oracle_calls"]["conservative"] == sum(m - j for j in range(3)) == step_count("pop_gs", m, 3)
-    pop = mean_rounded_up(schedule_counts("pop_gs", 14, 2, 3, 11))
+        assert stage["oracle_calls"]["conservative"] == sum(m - j for j in range(3))
+    pop = mean_rounded_up(schedule_counts(build_selector("pop_gs"), 14, 2, 3, 11))
     assert f"| setup1 | {tiny_scene.name} | 3 | pop_gs |  | 1 | 3 | {pop} | {pop} |" in md
     assert all((out / "setup1" / f).is_file() for f in ("psnr_vs_views.png", "chosen_cameras.png", "summary.csv"))

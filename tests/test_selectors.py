@@ -9,7 +9,6 @@ import torch
 from active import build_selector, list_selectors, register_selector, registry
 from active.base import SelectionContext, Selector
 from active.logdet import BlockGainOracle, BlockInformation
-from active.oracle_counts import conservative_count
 from tests.test_logdet import random_blocks, single_thread  # noqa: F401  (autouse fixture)
 from utils.errors import UserError
 
@@ -83,12 +82,12 @@ def test_lazy_greedy_on_full_subset_equals_plain_greedy(method, k):
     saved = 0
     for seed in range(4):
         blocks = problem(seed=20 + seed)
-        sel, _ = run(method, blocks, k, eps=1e-9)
         ids, gains = plain_greedy(blocks, k)
+        sel, oracle = run(method, blocks, k, eps=1e-9)
         assert sel.ids == ids
         assert torch.allclose(torch.tensor(sel.gains), torch.tensor(gains), rtol=1e-9)  # whitened vs dense, f64
-        assert sel.oracle_calls.conservative == sum(12 - j for j in range(k))
-        saved += sel.oracle_calls.conservative - sel.oracle_calls.evaluated
+        assert sel.conservative == sum(12 - j for j in range(k))
+        saved += sel.conservative - oracle.evaluated
     assert saved > 0  # the lazy queue skipped some evaluations
 
 
@@ -117,8 +116,7 @@ def test_every_selector_budget_determinism_counts(method):
     assert sel == again  # same generator seed -> same selection, gains and counts
     assert len(sel.ids) == 4 == len(set(sel.ids)) == len(sel.gains) and set(sel.ids) <= set(SPARSE_IDS)
     assert all(math.isfinite(g) and g >= 0 for g in sel.gains)
-    assert sel.oracle_calls.evaluated == oracle.evaluated <= sel.oracle_calls.conservative
-    assert sel.oracle_calls.conservative == conservative_count(method, 10, 4, 0.1)
+    assert oracle.evaluated <= sel.conservative == build_selector(method).conservative_count(10, 4)
     # Every selector commits its picks: the oracle's information is that of the chosen set.
     chosen = [SPARSE_IDS.index(v) for v in sel.ids]
     assert oracle.information.rho() == pytest.approx(float(rho_dense(blocks, [chosen])), rel=1e-9)
@@ -130,10 +128,9 @@ def test_every_selector_returns_all_when_k_at_least_m(method, k):
     blocks = problem(m=10, seed=2)
     sel, oracle = run(method, blocks, k, ids=SPARSE_IDS)
     assert sorted(sel.ids) == SPARSE_IDS
-    assert sel.oracle_calls.conservative == conservative_count(method, 10, k, 0.1)
-    assert sel.oracle_calls.evaluated == oracle.evaluated
+    assert oracle.evaluated <= sel.conservative == build_selector(method).conservative_count(10, k)
     empty, _ = run(method, problem(m=0), 3)
-    assert empty.ids == [] and empty.oracle_calls.conservative == 0
+    assert empty.ids == [] and empty.conservative == 0
     with pytest.raises(UserError, match="positive"):
         run(method, blocks, 0)
 
@@ -182,8 +179,75 @@ def test_streaming_commits_cost_no_fisher_recompute(method, options):
     oracle = BlockGainOracle(BlockInformation(blocks[0]), streaming)
     ctx = SelectionContext(list(range(20)), oracle, torch.Generator().manual_seed(0), stage=0)
     selection = build_selector(method, **options).select(ctx, 4)
-    assert len(calls) == selection.oracle_calls.evaluated
+    assert len(calls) == oracle.evaluated
     reference = BlockInformation(blocks[0])
     for v in selection.ids:
         reference.add(blocks[v + 1])
     torch.testing.assert_close(oracle.information.chol, reference.chol, rtol=1e-12, atol=1e-12)
+
+
+class ConstantGainOracle:
+    """Every gain is exactly 1.0; records the views evaluated at each pick (a pick ends with its commit)."""
+
+    def __init__(self):
+        self.evaluated, self.picks, self.committed = 0, [[]], []
+
+    def gain(self, view_id: int) -> float:
+        self.evaluated += 1
+        self.picks[-1].append(view_id)
+        return 1.0
+
+    def commit(self, view_id: int) -> None:
+        self.committed.append(view_id)
+        self.picks.append([])
+
+
+def select_constant(method: str, ids: list[int], k: int, seed: int = 0, **options):
+    oracle = ConstantGainOracle()
+    ctx = SelectionContext(ids, oracle, torch.Generator().manual_seed(seed), stage=0)
+    return build_selector(method, **options).select(ctx, k), oracle
+
+
+@pytest.mark.parametrize("method", ["pop_gs", "lite_gs", "ssg"])
+def test_exact_ties_go_to_the_lowest_view_id(method):
+    ids = [41, 7, 99, 3, 20, 8]  # unsorted on purpose
+    sel, oracle = select_constant(method, ids, 3, eps=1e-9) if method != "pop_gs" else select_constant(method, ids, 3)
+    assert sel.ids == [3, 7, 8] and sel.gains == [1.0, 1.0, 1.0]
+    assert oracle.committed == sel.ids
+
+
+@pytest.mark.parametrize("method", ["lite_gs", "ssg"])
+def test_ties_inside_a_random_subset_go_to_its_lowest_id(method):
+    ids = list(range(0, 120, 2))
+    for seed in range(5):
+        sel, oracle = select_constant(method, ids, 4, seed=seed, eps=0.6)
+        for pick, evaluated in zip(sel.ids, oracle.picks):
+            # with equal gains every member not seen before is evaluated, and the lowest evaluated id must win
+            assert not evaluated or pick <= min(evaluated)
+
+
+def test_lite_gs_draws_a_fresh_subset_for_every_pick():
+    # M = 60, K = 4, eps = 0.6: p_j = floor((60 - j) ln(1/0.6) / 4) = 7 or 6 of 60. With equal gains pick 0 evaluates
+    # exactly its subset; later picks must evaluate views outside it (fresh draws), and only p_j views each time.
+    ids = list(range(60))
+    sel, oracle = select_constant("lite_gs", ids, 4, seed=1, eps=0.6)
+    sizes = [max(1, math.floor((60 - j) * math.log(1 / 0.6) / 4)) for j in range(4)]
+    first = set(oracle.picks[0])
+    assert len(first) == sizes[0]
+    later = set().union(*oracle.picks[1:4])
+    assert later - first, "every pick evaluated only members of the first subset: subsets are not redrawn"
+    assert all(len(set(p)) <= size for p, size in zip(oracle.picks, sizes))
+    assert sel.conservative == sum(sizes)
+    other, _ = select_constant("lite_gs", ids, 4, seed=2, eps=0.6)
+    assert other.ids != sel.ids  # the subsets depend on the stage's generator
+
+
+def test_ssg_picks_all_come_from_its_one_subset():
+    ids = list(range(60))
+    sel, oracle = select_constant("ssg", ids, 4, seed=1, eps=0.6)
+    p = max(4, math.floor(60 * math.log(1 / 0.6) / 4))  # the lite_gs size at j = 0, at least K
+    subset = set(oracle.picks[0])
+    assert len(subset) == p  # equal gains: the first pick evaluates the whole subset
+    assert set(sel.ids) <= subset and set().union(*oracle.picks) <= subset
+    assert sel.ids == sorted(subset)[:4]  # ties to the lowest id within the subset
+    assert sel.conservative == sum(p - j for j in range(4))

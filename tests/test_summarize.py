@@ -34,7 +34,8 @@ def make_run(root: Path, setup: str, scene: str, tag: str, seed: int, method: st
                        "selected": chosen, "gains": [1.0] * k, "oracle_calls": {"conservative": cons, "evaluated": ev},
                        "fisher_seconds": 0.5 * (i + 1), "select_seconds": 1.0 * (i + 1), "test_psnr": 10.0 + i})
         views += chosen
-    selection = {"config": {"method": method, "eps": eps, "num_init_views": 2, "views_per_step": k,
+    options = {"eps": eps} if method in ("lite_gs", "ssg") else {}
+    selection = {"config": {"method": method, "selector_options": options, "num_init_views": 2, "views_per_step": k,
                             "max_views": len(views), "iters_per_view": 1, "iterations": 50, "seed": seed},
                  "stages": stages, "final": {"iteration": 50, "train_views": views, "test_psnr": 20.0 + seed}}
     (model / "selection.json").write_text(json.dumps(selection))
@@ -82,7 +83,7 @@ def build(root: Path) -> dict:
         for seed, counts in enumerate(per_seed):
             make_run(root, "setup4", "ship", tag, seed, method, k, eps, counts, (20.0 + eps, 0.8, 0.2))
         steps = [c for counts in per_seed for c in counts]
-        expect["oracle"][("setup4", k, method, f"{eps:g}" if method == "lite_gs" else "")] = tuple(
+        expect["oracle"][("setup4", k, method, f"eps={eps:g}" if method == "lite_gs" else "")] = tuple(
             math.ceil(Fraction(sum(c[i] for c in steps), len(steps))) for i in (0, 1))
     for eps in (0.1, 0.4):
         for method in ("lite_gs", "ssg"):
@@ -112,14 +113,17 @@ def test_tables_match_numpy_and_rounded_up_counts(tmp_path):
     assert quality[("setup1", "lite_gs K=3 eps=0.1")]["incomplete"] == 1
     assert quality[("setup1", "random K=3")]["incomplete"] == 0
 
-    oracle = {(r["setup"], r["K"], r["method"], r["eps"]): r for r in summarize.oracle_rows(runs)}
+    oracle = {(r["setup"], r["K"], r["method"], r["options"]): r for r in summarize.oracle_rows(runs)}
     for key, (cons, ev) in expect["oracle"].items():
         assert (oracle[key]["conservative"], oracle[key]["evaluated"]) == (cons, ev), key
-    pop6 = expect["oracle"][("setup4", 6, "pop_gs", "")][0]
+    # Exhaustive greedy on Setup 4's K = 6 steps (seeds [0, 6], pool 12): M = 10 picks 6, then M = 4 picks the last 4.
+    exhaustive = math.ceil(Fraction((10 + 9 + 8 + 7 + 6 + 5) + (4 + 3 + 2 + 1), 2))
     for eps in ("0.1", "0.3", "0.6"):
-        lite = expect["oracle"][("setup4", 6, "lite_gs", eps)][0]
-        assert abs(oracle[("setup4", 6, "lite_gs", eps)]["reduction_%"] - 100 * (1 - lite / pop6)) < 1e-9
-    assert ("ablation_ssg", 4, "ssg", "0.4") in oracle and oracle[("setup1", 3, "pop_gs", "")]["conservative"] == 7
+        lite = expect["oracle"][("setup4", 6, "lite_gs", f"eps={eps}")][0]
+        row = oracle[("setup4", 6, "lite_gs", f"eps={eps}")]
+        assert row["exhaustive"] == exhaustive and abs(row["reduction_%"] - 100 * (1 - lite / exhaustive)) < 1e-9
+    assert ("ablation_ssg", 4, "ssg", "eps=0.4") in oracle and oracle[("setup1", 3, "pop_gs", "")]["conservative"] == 7
+    assert not any(key[2] == "random" for key in oracle)  # no oracle calls: not in the oracle table
 
     times = {(r["setup"], r["method"]): r for r in summarize.time_rows(runs)}
     # three steps with select_seconds 1, 2, 3 and fisher_seconds 0.5, 1, 1.5 in every run

@@ -1,7 +1,6 @@
 """End to end: train -> render -> metrics on a tiny built-in scene, and an active run's selection.json."""
 import json
 
-from active.oracle_counts import step_count
 from tests.conftest import run_cli
 
 ACTIVE = ["--eval", "--num_init_views", "2", "--views_per_step", "3", "--max_views", "8", "--iters_per_view", "4",
@@ -43,9 +42,20 @@ def test_active_run_is_deterministic_and_counts_exactly(tiny_scene, tmp_path):
     assert a["final"]["train_views"][:2] == a["stages"][0]["train_views"]
     for stage in a["stages"]:
         m, k = stage["candidates"], len(stage["selected"])
-        assert stage["oracle_calls"]["conservative"] == stage["oracle_calls"]["evaluated"] == step_count("pop_gs", m, k)
+        assert stage["oracle_calls"]["conservative"] == stage["oracle_calls"]["evaluated"] == sum(m - j for j in range(k))
         assert all(g > 0 for g in stage["gains"])
         assert not set(stage["selected"]) & set(stage["train_views"])
     # The second step adds the remainder (8 - 5 = 3 views); rerunning a finished run leaves it untouched.
     r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(tmp_path / "a"), "--method", "pop_gs", *ACTIVE)
     assert r.returncode == 0 and "already finished" in r.stdout
+
+
+def test_iterations_shorter_than_the_schedule_are_raised_with_one_note(tiny_scene, tmp_path):
+    args = [a if a != "70" else "10" for a in ACTIVE]  # stages of 2 x 4 + 5 x 4 = 28 iterations > 10
+    r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(tmp_path / "m"), "--method", "random", *args)
+    assert r.returncode == 0, r.stderr
+    notes = [line for line in r.stdout.splitlines() if "shorter than the acquisition schedule" in line]
+    assert len(notes) == 1 and "stages of 8 + 20 = 28 iterations" in notes[0] and "training 28" in notes[0]
+    cfg = json.loads((tmp_path / "m" / "cfg_args").read_text())
+    assert cfg["run"]["iterations"] == 10 and cfg["total_iterations"] == 28
+    assert json.loads((tmp_path / "m" / "run_status.json").read_text())["iteration"] == 28

@@ -5,32 +5,31 @@ import heapq
 import math
 from typing import Callable
 
-from active.base import GainOracle, OracleCalls, Selection
+from active.base import GainOracle, Selection
 
 
-def lazy_greedy_pick(members: list[int], cached: dict[int, float], oracle: GainOracle) -> tuple[int, float, int]:
+def lazy_greedy_pick(members: list[int], cached: dict[int, float], oracle: GainOracle) -> tuple[int, float]:
     """Pick the member with the largest true marginal gain, re-evaluating only while a cached key could win.
 
     Cached gains are upper bounds (submodularity: gains only shrink as S grows; +inf = never evaluated).
-    Pop the top, re-evaluate it (one oracle), accept it if its fresh gain is >= the next cached key, else push it
-    back with the fresh key; a member that returns to the top with a fresh key wins without another oracle (so a
-    pick costs at most len(members) evaluations). Ties go to the lowest view id.
-    Returns (view, gain, oracle evaluations).
+    The heap is ordered by (key descending, view id ascending). Pop the top, re-evaluate it (one oracle) and accept
+    it if it still beats the next entry: a larger gain, or an equal gain and a lower id. Otherwise push it back with
+    the fresh key; a member that returns to the top with a fresh key wins without another oracle (so a pick costs at
+    most len(members) evaluations). This is plain greedy's choice exactly, exact ties going to the lowest view id.
+    Returns (view, gain).
     """
     heap = [(-cached[v], v) for v in members]
     heapq.heapify(heap)
-    evaluations = 0
     fresh: set[int] = set()
     while True:
         key, view = heapq.heappop(heap)
         if view in fresh:
-            return view, -key, evaluations
+            return view, -key
         gain = oracle.gain(view)
         fresh.add(view)
-        evaluations += 1
         cached[view] = gain
-        if not heap or gain >= -heap[0][0]:
-            return view, gain, evaluations
+        if not heap or (-gain, view) < heap[0]:  # strictly ahead of the next entry in heap order
+            return view, gain
         heapq.heappush(heap, (-gain, view))
 
 
@@ -43,14 +42,13 @@ def lazy_greedy_select(pool: list[int], k: int, oracle: GainOracle,
     """
     pool = list(pool)
     cached = {v: math.inf for v in pool}
-    ids, gains, conservative, evaluated = [], [], 0, 0
+    ids, gains, conservative = [], [], 0
     for j in range(k):
         members = members_for_pick(j, pool)
         conservative += len(members)
-        view, gain, calls = lazy_greedy_pick(members, cached, oracle)
-        evaluated += calls
+        view, gain = lazy_greedy_pick(members, cached, oracle)
         oracle.commit(view)
         pool.remove(view)
         ids.append(view)
         gains.append(gain)
-    return Selection(ids, gains, OracleCalls(conservative, evaluated))
+    return Selection(ids, gains, conservative)

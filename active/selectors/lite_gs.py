@@ -4,23 +4,29 @@ Cached gains gamma_v = +inf for every candidate at the start of the stage. At pi
 R of size p_j = max(1, floor((M - j) ln(1/eps) / K)) (capped at M - j) is drawn from the not-yet-chosen candidates
 with the stage's generator; the best member of R is found by lazy evaluation over the cached gains
 (`lazy_greedy_pick`); the winner is committed to the oracle. Conservative count: sum_j p_j, about M ln(1/eps) per
-step whatever K; evaluated: the gains actually computed.
+step whatever K; evaluated (counted by the oracle): the gains actually computed.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import torch
 
 from active.base import Selection, SelectionContext, Selector, check_eps, check_k
-from active.oracle_counts import subset_size
 from active.registry import register_selector
 from active.selectors.lazy_greedy import lazy_greedy_select
 
 
+def subset_size(remaining: int, k: int, eps: float) -> int:
+    """lite_gs subset size p = max(1, floor(remaining * ln(1/eps) / K)), capped at `remaining` (K >= 1)."""
+    return min(remaining, max(1, math.floor(remaining * math.log(1.0 / eps) / k)))
+
+
 @dataclass(frozen=True)
 class LiteGSConfig:
-    eps: float = 0.1  # accuracy parameter in (0, 1): guarantee 1 - exp(-(1 - eps)), ~M ln(1/eps) oracles per step
+    eps: float = field(default=0.1, metadata={"help": "accuracy parameter in (0, 1): guarantee 1 - exp(-(1 - eps)), "
+                                                      "about M ln(1/eps) oracles per step"})
 
     def __post_init__(self) -> None:
         check_eps(self.eps)
@@ -32,6 +38,10 @@ class LiteGSSelector(Selector):
 
     def __init__(self, config: LiteGSConfig = LiteGSConfig()):
         self.config = config
+
+    def conservative_count(self, m: int, k: int) -> int:
+        k = min(k, m)
+        return sum(subset_size(m - j, k, self.config.eps) for j in range(k))
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         check_k(k)

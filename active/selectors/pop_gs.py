@@ -1,7 +1,7 @@
 """`pop_gs`: exhaustive greedy D-optimal selection (POP-GS): every remaining candidate is scored at every pick."""
 from __future__ import annotations
 
-from active.base import OracleCalls, Selection, SelectionContext, Selector, check_k
+from active.base import Selection, SelectionContext, Selector, check_k
 from active.registry import register_selector
 
 
@@ -11,6 +11,9 @@ class PopGSSelector(Selector):
 
     Counts: conservative = evaluated = sum_{j < min(K, M)} (M - j).
     """
+
+    def conservative_count(self, m: int, k: int) -> int:
+        return sum(m - j for j in range(min(k, m)))
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         check_k(k)
@@ -27,4 +30,4 @@ class PopGSSelector(Selector):
             remaining.remove(best)
             ids.append(best)
             gains.append(best_gain)
-        return Selection(ids, gains, OracleCalls(calls, calls))
+        return Selection(ids, gains, calls)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import torch
 
-from active.base import OracleCalls, Selection, SelectionContext, Selector, check_k
+from active.base import Selection, SelectionContext, Selector, check_k
 from active.registry import register_selector
 
 
@@ -11,11 +11,14 @@ from active.registry import register_selector
 class RandomSelector(Selector):
     """Uniformly random views; the baseline that uses no information oracle.
 
-    Gains are reported as 0.0 and the counts as (0, 0). When the context carries an oracle the picks are still
-    committed to it, so its information state matches the chosen set as for every other selector.
+    Gains are reported as 0.0 and the count as 0. When the context carries an oracle the picks are still committed
+    to it, so its information state matches the chosen set as for every other selector.
     """
 
     uses_oracle = False
+
+    def conservative_count(self, m: int, k: int) -> int:
+        return 0
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         check_k(k)
@@ -24,4 +27,4 @@ class RandomSelector(Selector):
         if ctx.oracle is not None:
             for view in ids:
                 ctx.oracle.commit(view)
-        return Selection(ids, [0.0] * len(ids), OracleCalls(0, 0))
+        return Selection(ids, [0.0] * len(ids), 0)

@@ -6,19 +6,25 @@ it, with gains cached across the picks. Conservative count: sum_{j < K} (p - j).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 
 from active.base import Selection, SelectionContext, Selector, check_eps, check_k
-from active.oracle_counts import ssg_subset_size
 from active.registry import register_selector
 from active.selectors.lazy_greedy import lazy_greedy_select
+from active.selectors.lite_gs import subset_size
+
+
+def ssg_subset_size(m: int, k: int, eps: float) -> int:
+    """ssg subset size: the lite_gs size for the whole pool, raised to K so that K views can be chosen (K >= 1)."""
+    return min(m, max(k, subset_size(m, k, eps)))
 
 
 @dataclass(frozen=True)
 class SSGConfig:
-    eps: float = 0.1  # accuracy parameter in (0, 1); sets the subset size exactly as for lite_gs
+    eps: float = field(default=0.1, metadata={"help": "accuracy parameter in (0, 1): guarantee 1 - exp(-(1 - eps)), "
+                                                      "about M ln(1/eps) oracles per step"})
 
     def __post_init__(self) -> None:
         check_eps(self.eps)
@@ -30,6 +36,11 @@ class SSGSelector(Selector):
 
     def __init__(self, config: SSGConfig = SSGConfig()):
         self.config = config
+
+    def conservative_count(self, m: int, k: int) -> int:
+        k = min(k, m)
+        p = ssg_subset_size(m, k, self.config.eps) if k else 0
+        return sum(p - j for j in range(k))
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         check_k(k)

@@ -1,8 +1,8 @@
 """Selection cost: Fisher blocks vs a training step, one oracle, and the oracle selectors over K and their options.
 
     python benchmarks/bench_selection.py --model output/quickstart --mode cached
-    python benchmarks/bench_selection.py --model output/quickstart --mode streaming --ks 3 --methods pop_gs lite_gs
-    python benchmarks/bench_selection.py --model output/quickstart --memory_table --ks 3 --methods pop_gs
+    python benchmarks/bench_selection.py --model output/quickstart --mode streaming --ks 3 --methods NAME [NAME ...]
+    python benchmarks/bench_selection.py --model output/quickstart --memory_table --ks 3 --methods NAME
     python benchmarks/bench_selection.py --report benchmarks/results/selection_streaming_<date>.json
 
 Uses a trained model directory (default: the quickstart's) and its dataset; the seed views are chosen by

@@ -1,0 +1,174 @@
+"""One grid job: train -> render the test views -> metrics for one run, each step skipped when already done.
+
+A job is a submitit `Checkpointable`: on a Slurm preemption or timeout signal it stops its train.py (whose
+per-stage checkpoints are on disk) and is requeued; the requeued job resumes from the newest stage checkpoint.
+A per-run lock file keeps two copies of a job (e.g. a rerun while an earlier runner's job still works) from
+training the same directory at once: the second waits, then finds the run finished or resumes it.
+"""
+from __future__ import annotations
+
+import fcntl
+import json
+import logging
+import os
+import signal
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from submitit.helpers import Checkpointable
+
+log = logging.getLogger(__name__)
+THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")  # torch, BLAS and numba thread pools
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def trained_iteration(model_dir: Path) -> int | None:
+    """The final iteration when run_status.json says the training is complete, else None."""
+    status = _read_json(model_dir / "run_status.json")
+    if isinstance(status, dict) and status.get("status") == "complete":
+        return int(status.get("iteration", -1))
+    return None
+
+
+def is_finished(model_dir: Path) -> bool:
+    """Trained, rendered and scored: results.json holds the final iteration's entry."""
+    iteration = trained_iteration(model_dir)
+    results = _read_json(model_dir / "results.json")
+    return iteration is not None and isinstance(results, dict) and f"ours_{iteration}" in results
+
+
+def is_started(model_dir: Path) -> bool:
+    """train.py has written something a rerun resumes from (cfg_args, checkpoints)."""
+    return (model_dir / "cfg_args").is_file() or (model_dir / "checkpoints").is_dir()
+
+
+def error_line(text: str) -> str:
+    """The line that explains a failure: the last `error:` line, else the last non-empty line."""
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    errors = [line for line in lines if line.startswith("error:")]
+    return (errors or lines or ["(no output)"])[-1]
+
+
+@dataclass(frozen=True)
+class JobSpec:
+    """Everything a job needs, picklable: its run directory, log, the three CLI calls and its thread count."""
+
+    key: str  # <scene>/<tag>/seed<S>
+    model_dir: str
+    log_path: str
+    python: str  # interpreter for train.py / render.py / metrics.py
+    root: str  # repository root (train.py lives there)
+    train_args: tuple[str, ...]  # train.py flags without --device
+    device: str  # auto | cpu | cuda (auto: cuda when the job's machine has one)
+    threads: int  # OMP/MKL/numba threads of each CLI process
+
+    @property
+    def lock_path(self) -> Path:
+        return Path(self.log_path).with_suffix(".lock")
+
+    def commands(self, device: str) -> list[tuple[str, list[str]]]:
+        """(step, argv) of train, render and metrics."""
+        root = Path(self.root)
+        return [("train", [self.python, str(root / "train.py"), *self.train_args, "--device", device]),
+                ("render", [self.python, str(root / "render.py"), "-m", self.model_dir, "--skip_train", "--quiet"]),
+                ("metrics", [self.python, str(root / "metrics.py"), "-m", self.model_dir, "--quiet"])]
+
+
+class GridJob(Checkpointable):
+    """Callable run by submitit (or inline): returns {"state": "done"|"failed", "error", "seconds", "fresh"}."""
+
+    def __init__(self, spec: JobSpec):
+        self.spec = spec
+        self._child: subprocess.Popen | None = None
+
+    def __getstate__(self) -> dict:
+        return {"spec": self.spec}
+
+    def __setstate__(self, state: dict) -> None:
+        self.spec, self._child = state["spec"], None
+
+    def __call__(self) -> dict[str, Any]:
+        spec, t0 = self.spec, time.time()
+        Path(spec.log_path).parent.mkdir(parents=True, exist_ok=True)
+        lock_fd = os.open(spec.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            with open(spec.log_path, "a") as logf:
+                try:
+                    fcntl.flock(lock_fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                except BlockingIOError:
+                    self._note(logf, "another process is running this job; waiting for it")
+                    fcntl.flock(lock_fd, fcntl.LOCK_EX)
+                return {**self._steps(logf, lock_fd), "seconds": time.time() - t0}
+        finally:
+            self._stop_child()
+            os.close(lock_fd)
+
+    def _steps(self, logf, lock_fd: int) -> dict[str, Any]:
+        spec, model = self.spec, Path(self.spec.model_dir)
+        fresh = False
+        if is_finished(model):
+            self._note(logf, "already finished")
+            return {"state": "done", "error": "", "fresh": False}
+        env = {**os.environ, **{var: str(spec.threads) for var in THREAD_VARS}}
+        for step, argv in spec.commands(self._device()):
+            iteration = trained_iteration(model)
+            if step == "train" and iteration is not None:
+                continue
+            if step == "render" and (model / "test" / f"ours_{iteration}" / "renders").is_dir():
+                continue
+            if step == "train":
+                fresh = not is_started(model)
+            self._note(logf, f"{step}{' (fresh start)' if fresh and step == 'train' else ''}, "
+                             f"{spec.threads} thread(s): {subprocess.list2cmdline(argv)}")
+            logf.flush()
+            start = logf.tell()
+            # The child inherits the lock, so it stays held if this process dies while the child still works.
+            self._child = subprocess.Popen(argv, stdout=logf, stderr=subprocess.STDOUT, env=env, cwd=spec.root,
+                                           pass_fds=(lock_fd,))
+            code = self._child.wait()
+            self._child = None
+            if code != 0:
+                logf.flush()
+                with open(spec.log_path) as fh:
+                    fh.seek(start)
+                    line = error_line(fh.read())
+                self._note(logf, f"{step} failed (exit {code})")
+                return {"state": "failed", "error": f"{step}: {line}", "fresh": fresh}
+        return {"state": "done", "error": "", "fresh": fresh}
+
+    def _device(self) -> str:
+        if self.spec.device != "auto":
+            return self.spec.device
+        import torch  # only here: the runner's machine may differ from the job's
+        return "cuda" if torch.cuda.is_available() else "cpu"
+
+    @staticmethod
+    def _note(logf, message: str) -> None:
+        logf.write(f"[grid {time.strftime('%Y-%m-%d %H:%M:%S')}] {message}\n")
+        logf.flush()
+
+    def _stop_child(self) -> None:
+        """Terminate a running CLI (its stage checkpoints stay on disk)."""
+        child = self._child
+        if child is not None and child.poll() is None:
+            child.send_signal(signal.SIGTERM)
+            try:
+                child.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                child.kill()
+                child.wait()
+        self._child = None
+
+    def checkpoint(self, *args: Any, **kwargs: Any):
+        """submitit's preemption/timeout hook: stop train.py and requeue this job (it resumes from disk)."""
+        self._stop_child()
+        return super().checkpoint(*args, **kwargs)

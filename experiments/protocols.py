@@ -1,0 +1,117 @@
+"""The paper's experiment protocols as data, and their expansion into one run per (scene, method, K, eps, seed).
+
+Iteration counts are paper scale; `RunScale.iter_scale` shrinks them (and the densification start and the
+opacity-reset interval) for CPU-sized runs. Directory names follow `<method>[_k<K>][_eps<E>]`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+DEFAULT_EPS = 0.1  # the paper's eps "unless otherwise stated"
+DENSIFY_FROM_ITER = 500  # 3DGS defaults, scaled with the iterations
+OPACITY_RESET_INTERVAL = 3000
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """One setup of the paper: acquisition schedule, budgets and the settings swept."""
+
+    description: str
+    num_init_views: int  # seed views
+    ks: tuple[int, ...]  # views added per acquisition step; several = a sweep over K
+    max_views: int  # view budget
+    iters_per_view: int  # each stage trains iters_per_view x current #views iterations (paper scale)
+    iterations: int  # total iterations (paper scale)
+    default_scenes: tuple[str, ...]
+    default_methods: tuple[str, ...]
+    eps_sweep: tuple[float, ...] = ()  # fixed eps values for every eps-taking method (--eps unused); () = --eps
+    extra_eps: dict[int, tuple[float, ...]] = field(default_factory=dict)  # K -> more eps values (eps methods)
+    k_in_name: bool = False  # directory names carry _k<K> (the K sweep)
+
+
+PROTOCOLS: dict[str, Protocol] = {
+    "setup1": Protocol("2 seed views, +3 per step to 11, 100 v iterations per stage, 11,000 in total "
+                       "(Blender, Mip-NeRF 360)", 2, (3,), 11, 100, 11_000, ("lego",),
+                       ("random", "pop_gs", "lite_gs")),
+    "setup2": Protocol("5 seed views, +4 per step to 21, 300 v per stage, 21,000 in total (Blender)",
+                       5, (4,), 21, 300, 21_000, ("lego",), ("random", "pop_gs", "lite_gs")),
+    "setup3": Protocol("3 seed views, +4 per step to 15, 100 v per stage, 11,000 in total (Mip-NeRF 360)",
+                       3, (4,), 15, 100, 11_000, ("garden",), ("random", "pop_gs", "lite_gs")),
+    "setup4": Protocol("3 seed views, K in {3, 4, 6} to 15, 300 v per stage, 15,000 in total (ship); "
+                       "K = 6 also eps = 0.3, 0.6", 3, (3, 4, 6), 15, 300, 15_000, ("ship",),
+                       ("random", "pop_gs", "lite_gs"), extra_eps={6: (0.3, 0.6)}, k_in_name=True),
+    "ablation_ssg": Protocol("lite_gs vs ssg on ship, Setup 4 protocol with K = 4, "
+                             "eps in {0.1, 0.2, 0.25, 0.4, 0.6}", 3, (4,), 15, 300, 15_000, ("ship",),
+                             ("lite_gs", "ssg"), eps_sweep=(0.1, 0.2, 0.25, 0.4, 0.6)),
+}
+
+
+@dataclass(frozen=True)
+class RunScale:
+    """How far a grid shrinks the paper's runs."""
+
+    resolution: int = 8  # train.py -r (8: 100 px for 800 px Blender scenes)
+    iter_scale: float = 0.1  # multiplies iterations per view, total, densification start, opacity-reset interval
+    num_points: int = 3000  # random initial points for synthetic scenes (paper: 100,000)
+
+    def scaled(self, n: int) -> int:
+        """max(1, round(n * iter_scale)), halves rounded up (as the shell scripts did)."""
+        return max(1, int(n * self.iter_scale + 0.5))
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One training run of a grid: where it goes and which schedule flags train.py gets."""
+
+    setup: str
+    scene: str
+    method: str
+    k: int
+    eps: float | None  # None: the method takes no eps
+    seed: int
+    tag: str  # directory name <method>[_k<K>][_eps<E>]
+
+    @property
+    def key(self) -> str:
+        """<scene>/<tag>/seed<S>, the run's path below OUT/<setup>."""
+        return f"{self.scene}/{self.tag}/seed{self.seed}"
+
+    def schedule_args(self, protocol: Protocol, scale: RunScale) -> list[str]:
+        """train.py flags of the acquisition schedule, scaled."""
+        args = ["--seed", str(self.seed), "--method", self.method]
+        if self.eps is not None:
+            args += ["--eps", f"{self.eps:g}"]
+        return args + [
+            "--num_init_views", str(protocol.num_init_views), "--views_per_step", str(self.k),
+            "--max_views", str(protocol.max_views), "--iters_per_view", str(scale.scaled(protocol.iters_per_view)),
+            "--iterations", str(scale.scaled(protocol.iterations)), "--num_random_points", str(scale.num_points),
+            "--densify_from_iter", str(scale.scaled(DENSIFY_FROM_ITER)),
+            "--opacity_reset_interval", str(scale.scaled(OPACITY_RESET_INTERVAL))]
+
+
+def expand(setup: str, scenes: list[str], methods: list[str], seeds: int, eps: float,
+           takes_eps: Callable[[str], bool]) -> list[RunSpec]:
+    """Every run of `setup` over scenes x methods x seeds (0..seeds-1), in scene, K, method, eps, seed order.
+
+    An eps-taking method (`takes_eps(method)`) runs at `eps`, or at each value of the protocol's eps sweep; its
+    directory name carries `_eps<E>` when the protocol sweeps eps or E is not the paper's 0.1. `extra_eps[K]`
+    adds eps-taking runs at that K (always named with their eps; a value equal to `eps` is not repeated).
+    """
+    protocol = PROTOCOLS[setup]
+    runs = []
+    for scene in scenes:
+        for k in protocol.ks:
+            for method in methods:
+                settings: list[tuple[float | None, bool]]
+                if not takes_eps(method):
+                    settings = [(None, False)]
+                elif protocol.eps_sweep:
+                    settings = [(e, True) for e in protocol.eps_sweep]
+                else:
+                    settings = [(eps, eps != DEFAULT_EPS)]
+                    settings += [(e, True) for e in protocol.extra_eps.get(k, ()) if e != eps]
+                for e, named in settings:
+                    tag = method + (f"_k{k}" if protocol.k_in_name else "") + (f"_eps{e:g}" if named else "")
+                    runs += [RunSpec(setup, scene, method, k, e, seed, tag) for seed in range(seeds)]
+    return runs

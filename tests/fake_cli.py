@@ -1,5 +1,5 @@
 """A stand-in interpreter for the grid's CLI calls (`grid.py --python FAKE`): records each train/render/metrics
-call as a JSON line in $FAKE_LOG and writes the files the real CLIs would (selection.json with closed-form oracle
+call as a JSON line in $FAKE_LOG and writes the files the real CLIs would (selection.json with stand-in oracle
 counts, run_status.json, results.json). $FAKE_FAIL (':'-separated model paths) makes train.py fail with an
 `error:` line; $FAKE_SLEEP seconds are spent in train.py before it writes anything."""
 from __future__ import annotations
@@ -29,16 +29,12 @@ if Path(args[0]).name == "train.py":
         print("error: fake failure of " + str(model), file=sys.stderr)
         sys.exit(2)
     time.sleep(float(os.environ.get("FAKE_SLEEP", "0")))
-    import importlib.util  # oracle_counts.py alone: the active package would import torch
-    spec = importlib.util.spec_from_file_location("oc", "{root}/active/oracle_counts.py")
-    oc = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(oc)
     n0, k, vmax = int(a.num_init_views), int(a.views_per_step), int(a.max_views)
     eps = float(a.eps) if a.eps else 0.1
     views, stages = list(range(n0)), []
     while len(views) < vmax:
         step = min(k, vmax - len(views))
-        count = oc.step_count(a.method, {pool} - len(views), step, eps)
+        count = 0 if a.method == "random" else {pool} - len(views)  # a stand-in count
         stages.append({{"train_views": list(views), "candidates": {pool} - len(views),
                        "selected": list(range(len(views), len(views) + step)), "test_psnr": 10.0,
                        "oracle_calls": {{"conservative": count, "evaluated": count}},

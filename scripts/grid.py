@@ -136,8 +136,9 @@ def parse(argv: list[str]) -> tuple[GridConfig, object]:
     def takes_eps(method: str) -> bool:
         return "eps" in selector_options(method)
 
+    runs = expand(args.setup, scenes, methods, seeds, eps, takes_eps)
     if args.max_parallel is None:
-        max_parallel = 1 if args.launcher != "slurm" else 10**6
+        max_parallel = 1 if args.launcher != "slurm" else max(1, len(runs))
     else:
         max_parallel = _int("max_parallel", args.max_parallel, 1)
     if args.launcher == "inline" and max_parallel > 1:
@@ -159,7 +160,6 @@ def parse(argv: list[str]) -> tuple[GridConfig, object]:
     if device == "auto" and args.launcher != "slurm":  # same machine as the jobs: decide once
         import torch
         device = "cuda" if torch.cuda.is_available() else "cpu"
-    runs = expand(args.setup, scenes, methods, seeds, eps, takes_eps)
     cfg = GridConfig(setup=args.setup, data=data, out=out, runs=tuple(runs), scale=scale, device=device,
                      extra_args=tuple(extra), launcher=args.launcher, max_parallel=max_parallel, threads=threads,
                      python=args.python, slurm=slurm, dry_run=args.dry_run)

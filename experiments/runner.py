@@ -16,7 +16,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from experiments.jobs import GridJob, JobSpec, error_line, is_finished
 from experiments.protocols import PROTOCOLS, RunScale, RunSpec
@@ -93,7 +93,7 @@ def train_command(spec: JobSpec) -> str:
 # ----------------------------------------------------------------------------------------------- flag checks
 
 
-def check_flags(cfg: GridConfig, specs: list[JobSpec], takes_eps: Callable[[str], bool]) -> None:
+def check_flags(cfg: GridConfig, specs: list[JobSpec]) -> None:
     """Refuse an output directory holding runs made with other flags (grid.json, then each run's cfg_args)."""
     record = _read_json(cfg.setup_dir / RECORD)
     if isinstance(record, dict):
@@ -107,6 +107,8 @@ def check_flags(cfg: GridConfig, specs: list[JobSpec], takes_eps: Callable[[str]
     if not started:
         return
     import train  # the exact config train.py would resolve from the same flags
+    from active.registry import list_selectors, selector_options
+    any_selector_option = {o for m in list_selectors() for o in selector_options(m)}
     for spec, run in started:
         saved = _read_json(Path(spec.model_dir) / "cfg_args")
         if not isinstance(saved, dict):
@@ -114,8 +116,9 @@ def check_flags(cfg: GridConfig, specs: list[JobSpec], takes_eps: Callable[[str]
         expected = train.parse_config([*spec.train_args, "--device", "cpu"]).to_dict()
         for group, values in expected.items():
             for name, value in values.items():
-                if name in NOT_COMPARED or (name == "eps" and not takes_eps(run.method)):
-                    continue
+                if name in NOT_COMPARED or (name in any_selector_option
+                                            and name not in selector_options(run.method)):
+                    continue  # another selector's option: this run's method ignores it
                 old = saved.get(group, {}).get(name, value) if isinstance(saved.get(group), dict) else value
                 if old != value:
                     flag = GRID_FLAG.get(name, "an extra train.py flag after --")
@@ -289,10 +292,10 @@ def _wait(running: dict[str, tuple[JobSpec, Any]], tracker: Tracker, poll_s: flo
 # ----------------------------------------------------------------------------------------------- the grid
 
 
-def run_grid(cfg: GridConfig, takes_eps: Callable[[str], bool]) -> int:
+def run_grid(cfg: GridConfig) -> int:
     """Run (or resume) every job of the grid, then summarize; returns the number of failed jobs."""
     specs = [job_spec(cfg, run) for run in cfg.runs]
-    check_flags(cfg, specs, takes_eps)
+    check_flags(cfg, specs)
     todo = [s for s in specs if not is_finished(Path(s.model_dir))]
     # Jobs an earlier (killed) runner's workers still hold go first: they take a slot while they wait for them.
     todo.sort(key=lambda s: not lock_held(s))

@@ -95,8 +95,8 @@ def _words(values: list[str] | None, default: tuple[str, ...]) -> list[str]:
     return list(dict.fromkeys(words))
 
 
-def parse(argv: list[str]) -> tuple[GridConfig, object]:
-    """Validate the command line into a GridConfig (UserError on bad input); also returns takes_eps."""
+def parse(argv: list[str]) -> GridConfig:
+    """Validate the command line into a GridConfig (UserError on bad input)."""
     if "--" in argv:
         cut = argv.index("--")
         argv, extra = argv[:cut], argv[cut + 1:]
@@ -163,13 +163,12 @@ def parse(argv: list[str]) -> tuple[GridConfig, object]:
     cfg = GridConfig(setup=args.setup, data=data, out=out, runs=tuple(runs), scale=scale, device=device,
                      extra_args=tuple(extra), launcher=args.launcher, max_parallel=max_parallel, threads=threads,
                      python=args.python, slurm=slurm, dry_run=args.dry_run)
-    return cfg, takes_eps
+    return cfg
 
 
 def main() -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout)
-    cfg, takes_eps = parse(sys.argv[1:])
-    return min(run_grid(cfg, takes_eps), 100)
+    return min(run_grid(parse(sys.argv[1:])), 100)
 
 
 if __name__ == "__main__":

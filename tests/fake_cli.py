@@ -1,5 +1,5 @@
 """A stand-in interpreter for the grid's CLI calls (`grid.py --python FAKE`): records each train/render/metrics
-call as a JSON line in $FAKE_LOG and writes the files the real CLIs would (selection.json with stand-in oracle
+call as a JSON line in $FAKE_LOG and writes the files the real CLIs would (selection.json with closed-form oracle
 counts, run_status.json, results.json). $FAKE_FAIL (':'-separated model paths) makes train.py fail with an
 `error:` line; $FAKE_SLEEP seconds are spent in train.py before it writes anything."""
 from __future__ import annotations
@@ -29,19 +29,30 @@ if Path(args[0]).name == "train.py":
         print("error: fake failure of " + str(model), file=sys.stderr)
         sys.exit(2)
     time.sleep(float(os.environ.get("FAKE_SLEEP", "0")))
+    import math  # closed-form counts written out here (importing the active package would import torch)
+    def step_count(method, m, k, eps):
+        if method == "pop_gs":
+            return sum(m - j for j in range(k))
+        if method == "lite_gs":
+            return sum(min(m - j, max(1, math.floor((m - j) * math.log(1 / eps) / k))) for j in range(k))
+        if method == "ssg":
+            p = min(m, max(k, math.floor(m * math.log(1 / eps) / k)))
+            return sum(p - j for j in range(k))
+        return 0
     n0, k, vmax = int(a.num_init_views), int(a.views_per_step), int(a.max_views)
     eps = float(a.eps) if a.eps else 0.1
     views, stages = list(range(n0)), []
     while len(views) < vmax:
         step = min(k, vmax - len(views))
-        count = 0 if a.method == "random" else {pool} - len(views)  # a stand-in count
+        count = step_count(a.method, {pool} - len(views), step, eps)
         stages.append({{"train_views": list(views), "candidates": {pool} - len(views),
                        "selected": list(range(len(views), len(views) + step)), "test_psnr": 10.0,
                        "oracle_calls": {{"conservative": count, "evaluated": count}},
                        "fisher_seconds": 0.0, "select_seconds": 0.0}})
         views += stages[-1]["selected"]
     model.mkdir(parents=True, exist_ok=True)
-    (model / "selection.json").write_text(json.dumps({{"config": {{"method": a.method, "eps": eps,
+    options = {{"eps": eps}} if a.eps else {{}}
+    (model / "selection.json").write_text(json.dumps({{"config": {{"method": a.method, "selector_options": options,
         "views_per_step": k, "seed": int(a.seed)}}, "stages": stages}}))
     (model / "run_status.json").write_text(json.dumps({{"status": "complete", "iteration": int(a.iterations)}}))
 elif Path(args[0]).name == "render.py":

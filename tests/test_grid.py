@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-import active  # noqa: F401  (registers the selectors)
+from active import build_selector
+from active.oracle_counts import mean_rounded_up, schedule_counts
 from active.registry import selector_options
 from experiments.protocols import PROTOCOLS, RunScale, expand
 from tests.conftest import ROOT
@@ -264,6 +265,11 @@ def test_tiny_grid_end_to_end_local(tiny_scene, tmp_path):
     for label in ("random K=3", "pop_gs K=3"):
         assert f"| setup1 | {label} | {tiny_scene.name} | 2 | 0 |" in md, label
     assert "Incomplete runs" not in md and "| conservative |" in md
+    pop = mean_rounded_up(schedule_counts(build_selector("pop_gs"), 14, 2, 3, 11))
+    assert f"| setup1 | {tiny_scene.name} | 3 | pop_gs |  | 2 | 6 | {pop} | {pop} |" in md
+    sel = json.loads((out / "setup1" / tiny_scene.name / "pop_gs" / "seed1" / "selection.json").read_text())
+    assert [s["oracle_calls"]["conservative"] for s in sel["stages"]] == [
+        sum(s["candidates"] - j for j in range(3)) for s in sel["stages"]]
     status = json.loads((out / "setup1" / "grid_status.json").read_text())
     assert status["counts"]["done"] == 4 and status["threads_per_job"] == 1
     for job in status["jobs"]:

@@ -5,8 +5,10 @@ import os
 import subprocess
 import sys
 
+from active import build_selector
+from active.oracle_counts import mean_rounded_up, schedule_counts
 from tests.conftest import ROOT
-from tests.fake_cli import calls, make_fake, option
+from tests.fake_cli import POOL, calls, make_fake, option
 
 
 def script(name: str, *args: str, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -51,7 +53,8 @@ def test_setup4_wrapper_layout_scaling_and_extra_args(tmp_path):
         assert option(c, "--sh_degree") == "1"
     md = (out / "setup4" / "summary.md").read_text()
     for k in (3, 4, 6):
-        assert f"| setup4 | ship | {k} | pop_gs |  | 2 |" in md
+        pop = mean_rounded_up(schedule_counts(build_selector("pop_gs"), POOL, 3, k, 15))
+        assert f"| setup4 | ship | {k} | pop_gs |  | 2 |" in md and f"| {pop} | {pop} | {pop} |" in md
 
 
 def test_ablation_wrapper_dry_run(tmp_path):

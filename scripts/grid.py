@@ -162,7 +162,8 @@ def parse(argv: list[str]) -> GridConfig:
         device = "cuda" if torch.cuda.is_available() else "cpu"
     cfg = GridConfig(setup=args.setup, data=data, out=out, runs=tuple(runs), scale=scale, device=device,
                      extra_args=tuple(extra), launcher=args.launcher, max_parallel=max_parallel, threads=threads,
-                     python=args.python, slurm=slurm, dry_run=args.dry_run)
+                     python=str(Path(args.python).absolute()) if os.sep in args.python else args.python,
+                     slurm=slurm, dry_run=args.dry_run)
     return cfg
 
 

@@ -157,16 +157,25 @@ class GridJob(Checkpointable):
         logf.flush()
 
     def _stop_child(self) -> None:
-        """Terminate a running CLI (its stage checkpoints stay on disk)."""
-        child = self._child
-        if child is not None and child.poll() is None:
-            child.send_signal(signal.SIGTERM)
-            try:
-                child.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                child.kill()
-                child.wait()
-        self._child = None
+        """Terminate a running CLI (its stage checkpoints stay on disk) and reap it.
+
+        Reaped with os.waitpid, not Popen.wait: in submitit's signal handler the interrupted Popen.wait still
+        holds the Popen's wait lock, and a second Popen.wait would spin until its timeout.
+        """
+        child, self._child = self._child, None
+        if child is None or child.returncode is not None:
+            return
+        child.send_signal(signal.SIGTERM)
+        deadline = time.time() + 30
+        try:
+            while os.waitpid(child.pid, os.WNOHANG)[0] == 0:
+                if time.time() > deadline:
+                    child.kill()
+                    os.waitpid(child.pid, 0)
+                    break
+                time.sleep(0.05)
+        except ChildProcessError:  # already reaped
+            pass
 
     def checkpoint(self, *args: Any, **kwargs: Any):
         """submitit's preemption/timeout hook: stop train.py and requeue this job (it resumes from disk)."""

@@ -1,7 +1,8 @@
 """A stand-in interpreter for the grid's CLI calls (`grid.py --python FAKE`): records each train/render/metrics
 call as a JSON line in $FAKE_LOG and writes the files the real CLIs would (selection.json with closed-form oracle
 counts, run_status.json, results.json). $FAKE_FAIL (':'-separated model paths) makes train.py fail with an
-`error:` line; $FAKE_SLEEP seconds are spent in train.py before it writes anything."""
+`error:` line; $FAKE_SLEEP seconds are spent in train.py after it made checkpoints/, unless that existed (a resumed
+run)."""
 from __future__ import annotations
 
 import os
@@ -28,7 +29,9 @@ if Path(args[0]).name == "train.py":
     if str(model) in os.environ.get("FAKE_FAIL", "").split(":"):
         print("error: fake failure of " + str(model), file=sys.stderr)
         sys.exit(2)
-    time.sleep(float(os.environ.get("FAKE_SLEEP", "0")))
+    if not (model / "checkpoints").is_dir():  # a resumed run (checkpoints on disk) does not sleep again
+        (model / "checkpoints").mkdir(parents=True)
+        time.sleep(float(os.environ.get("FAKE_SLEEP", "0")))
     import math  # closed-form counts written out here (importing the active package would import torch)
     def step_count(method, m, k, eps):
         if method == "pop_gs":

@@ -242,6 +242,31 @@ def test_sigkill_runner_then_rerun_finishes_without_rerunning_jobs(tmp_path):
     assert _summary_quality(out / "setup1") == _summary_quality(tmp_path / "whole" / "setup1")
 
 
+def test_timeout_checkpoints_and_requeues(tmp_path, monkeypatch):
+    """submitit's timeout signal reaches GridJob.checkpoint: train.py is stopped, the job requeued, and the requeued
+    job resumes the run instead of starting it again (local executor, 3 s limit, signal 1 s before)."""
+    import submitit
+    from experiments.jobs import GridJob, JobSpec
+    env, python, data, log = make_fake(tmp_path)
+    for var, value in (("FAKE_LOG", env["FAKE_LOG"]), ("FAKE_SLEEP", "30"), ("PYTHONPATH", str(ROOT))):
+        monkeypatch.setenv(var, value)  # the executor's processes inherit them
+    model = tmp_path / "out" / "setup1" / "ship" / "random" / "seed0"
+    spec = JobSpec(key="ship/random/seed0", model_dir=str(model), log_path=str(tmp_path / "job.log"),
+                   python=str(python), root=str(ROOT), device="cpu", threads=1,
+                   train_args=("-s", str(data / "ship"), "-m", str(model), "--seed", "0", "--method", "random",
+                               "--num_init_views", "2", "--views_per_step", "3", "--max_views", "11",
+                               "--iterations", "55"))
+    executor = submitit.LocalExecutor(tmp_path / "submitit", max_num_timeout=5)
+    executor.update_parameters(timeout_min=3 / 60, signal_delay_s=1)
+    job = executor.submit(GridJob(spec))
+    outcome = job.result()
+    assert outcome["state"] == "done", outcome
+    assert [option(c, "-m") for c in calls(log, "train.py")] == [str(model)] * 2  # stopped once, then resumed
+    text = (tmp_path / "job.log").read_text()
+    assert text.count("train (fresh start)") == 1 and text.count("] train, 1 thread(s)") == 1
+    assert "Requeued" in (job.stdout() or "") + (job.stderr() or "") and (model / "results.json").is_file()
+
+
 def test_inline_launcher(tmp_path):
     env, python, data, log = make_fake(tmp_path)
     r = grid("--setup", "ablation_ssg", "--data", str(data), "--out", str(tmp_path / "out"), "--python", str(python),

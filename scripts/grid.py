@@ -40,7 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--methods", nargs="+", default=None,
                    help="selectors to compare (default: the setup's; see train.py --help for the registered ones)")
     p.add_argument("--seeds", default="1", help="number of seeds, run as 0..N-1 (default: 1)")
-    p.add_argument("--out", default=str(ROOT / "output" / "experiments"), help="output root (default: output/experiments)")
+    p.add_argument("--out", default=str(ROOT / "output" / "experiments"),
+                   help="output root (default: output/experiments)")
     p.add_argument("--launcher", default="local", help="local (submitit processes), slurm (submitit arrays) or "
                    "inline (this process, one job at a time; for debugging) (default: local)")
     p.add_argument("--max_parallel", default=None, help="jobs at a time (local: default 1; slurm: the array's "

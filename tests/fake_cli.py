@@ -18,7 +18,8 @@ import argparse, json, os, sys, time
 from pathlib import Path
 args = sys.argv[1:]
 with open(os.environ["FAKE_LOG"], "a") as fh:
-    fh.write(json.dumps([Path(args[0]).name] + args[1:] + ["OMP_NUM_THREADS=" + os.environ.get("OMP_NUM_THREADS", "")]) + "\n")
+    threads = "OMP_NUM_THREADS=" + os.environ.get("OMP_NUM_THREADS", "")
+    fh.write(json.dumps([Path(args[0]).name] + args[1:] + [threads]) + "\n")
 p = argparse.ArgumentParser()
 for name in ["-s", "-m", "-r", "--device", "--seed", "--method", "--eps", "--num_init_views", "--views_per_step",
              "--max_views", "--iters_per_view", "--iterations", "--num_random_points"]:

@@ -14,7 +14,7 @@ import argparse
 import logging
 import random
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,10 +30,12 @@ from arguments import (ActiveConfig, ModelConfig, PipelineConfig, RunConfig, add
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
+from scene.resolution_policy import training_resolution
 from scene.scene import Scene
 from scene.trained import background_color, raster_settings
 from training.densify import DensifyConfig, DensifyStrategy
 from training.optim import OptimConfig, PositionLRSchedule, create_optimizer
+from training.time_estimate import RunTimeEstimator
 from utils.checkpoint import RunDirectory
 from utils.errors import UserError, run_cli
 from utils.io import write_json
@@ -262,6 +264,7 @@ class Run:
     state: TrainState
     rng: random.Random  # the view order of the training passes
     lr_schedule: PositionLRSchedule
+    eta: RunTimeEstimator | None = None  # the one-line wall-time estimate after the first iterations
 
 
 def open_run(cfg: TrainConfig, model_path: str) -> Run:
@@ -269,6 +272,11 @@ def open_run(cfg: TrainConfig, model_path: str) -> Run:
     run_dir = RunDirectory(model_path)
     if cfg.run.overwrite:
         run_dir.clear()
+    resolution = training_resolution(cfg.model)  # the effective -r (CPU width cap, 3DGS rule), kept in cfg_args
+    if resolution is not None:
+        cfg = replace(cfg, model=replace(cfg.model, resolution=resolution.resolution))
+        if resolution.notice:
+            print(resolution.notice)
     scene = Scene.load(cfg.model.source_path, model_path, white_background=cfg.model.white_background,
                        resolution=cfg.model.resolution, eval=cfg.model.eval, images=cfg.model.images,
                        device=cfg.model.device)
@@ -305,6 +313,8 @@ def train_stage(run: Run, progress: tqdm) -> None:
         loss, train_psnr = training_step(state, cam, run.cfg, run.background, run.settings, run.lr_schedule,
                                          run.scene.extent)
         progress.update(1)
+        if run.eta is not None and (note := run.eta.after_iteration(state.iteration)) is not None:
+            progress.write(note)
         if state.iteration % 10 == 0:
             progress.set_postfix(loss=f"{loss:.4f}", psnr=f"{train_psnr:.2f}", gaussians=state.gaussians.num_gaussians,
                                  views=len(state.train_views))
@@ -359,6 +369,7 @@ def training(cfg: TrainConfig) -> Path:
               "pass --overwrite to train it again")
         return Path(model_path)
     run = open_run(cfg, model_path)
+    run.eta = RunTimeEstimator.for_run(run)
     progress = tqdm(total=run.plan.total_iterations, initial=run.state.iteration, disable=cfg.run.quiet,
                     desc="training", dynamic_ncols=True)
     while True:

@@ -28,12 +28,16 @@ class ModelConfig:
     model_path: str = field(default="", metadata=_flag(
         "-m", "output directory (default output/<scene name>; output/<scene name>_<method> for an active run)"))
     images: str = field(default="images", metadata=_flag("-i", "COLMAP image folder name"))
-    resolution: int = field(default=-1, metadata=_flag("-r", "1/2/4/8 = downscale factor, other >0 = target width, -1 = as is"))
+    resolution: int = field(default=-1, metadata=_flag(
+        "-r", "1/2/4/8 = downscale factor, other >0 = target width, -1 = as is up to --cpu_max_width on the CPU, "
+        "1600 px on CUDA"))
     white_background: bool = field(default=False, metadata=_flag("-w", "composite RGBA on white (Blender)"))
     eval: bool = field(default=False, metadata=_flag(None, "hold out test views (COLMAP: every 8th; Blender: transforms_test)"))
     sh_degree: int = field(default=3, metadata=_flag(None, "maximum spherical-harmonics degree"))
     num_random_points: int = field(default=10_000, metadata=_flag(None, "random initial points for synthetic (Blender) scenes"))
     device: str = field(default="cpu", metadata=_flag(None, "torch device", ("cpu", "cuda")))
+    cpu_max_width: int = field(default=200, metadata=_flag(
+        None, "without -r, a CPU run trains on images at most this many px wide (downscale 2/4/8, else this width)"))
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,7 @@
 """Rasterizer speed: the tiled fast path vs the dense autograd reference, and `attribute_gram` vs a training step.
 
     python benchmarks/bench_rasterize.py [--presets 2k@128 10k@256 garden] [--repeats 5] [--threads 2]
+    python benchmarks/bench_rasterize.py --resolution_scaling [--model output/lego] [--widths 200 400 800]
 
 Inputs are already-projected 2D Gaussians (what `rasterize` consumes). Synthetic presets `<N>@<size>` draw N
 anisotropic Gaussians uniformly over a size x size image (sigma log-uniform in [0.5, 5] px at 128 px, scaled
@@ -11,6 +12,12 @@ opacity 0.1) into its first camera at 1/4 resolution.
 Timed (warm-up, then the median of R runs): fast forward (no grad), fast forward+backward (one training step
 of the rasterizer), the dense reference forward+backward (only where N x H x W <= --ref_max_pairs), and
 `attribute_gram` (one view's Fisher-ready Gram matrices). Prints a table and writes JSON to benchmarks/results/.
+
+`--resolution_scaling` times instead one whole training step (render forward + L1/SSIM loss + backward) of a
+fixed set of 3D Gaussians from one view of a Blender scene (`--source`, default ../shared/data/lego) at each of
+`--widths`, for two models: train.py's fresh random initialisation (`--num_random_points`, seed 0) and, with
+`--model`, a trained one (a model directory or a PLY). The ratio column is the step time over the previous
+width's; with the pixel count growing 4x per doubling, a ratio near 4 means the cost is linear in pixels.
 """
 from __future__ import annotations
 
@@ -35,6 +42,7 @@ from gaussian_renderer.reference import rasterize_reference  # noqa: E402
 from gaussian_renderer.settings import RasterSettings  # noqa: E402
 
 GARDEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "gsplat_garden" / "test_garden.npz"
+LEGO = Path(__file__).resolve().parents[2] / "shared" / "data" / "lego"
 Inputs = tuple  # (means2d [N,2], conics [N,3], opacities [N], colors [N,3], depths [N], radii [N], W, H, bg [3])
 
 
@@ -115,6 +123,78 @@ def bench(name: str, inputs: Inputs, settings: RasterSettings, repeats: int, ref
     return row
 
 
+def latest_ply(model: str) -> Path:
+    """`model` itself when it is a PLY, else the newest point_cloud/iteration_N/point_cloud.ply under it."""
+    path = Path(model)
+    if path.suffix == ".ply":
+        return path
+    plys = sorted(path.glob("point_cloud/iteration_*/point_cloud.ply"), key=lambda p: int(p.parent.name.split("_")[1]))
+    if not plys:
+        raise SystemExit(f"no point_cloud/iteration_N/point_cloud.ply under {path}; pass a trained model directory")
+    return plys[-1]
+
+
+def scaling_models(source: Path, model: str | None, num_points: int) -> list[tuple[str, object]]:
+    """(name, GaussianModel) pairs: train.py's fresh random initialisation and, when given, a trained model."""
+    from scene.gaussian_model import GaussianModel
+    from scene.scene import Scene
+
+    scene = Scene.load(str(source), Path("unused"), white_background=False, resolution=8, eval=False)
+    init = scene.initial_point_cloud(num_points, seed=0)
+    models = [("fresh", scene.new_gaussians(init, sh_degree=3, device="cpu"))]
+    if model:
+        models.append(("trained", GaussianModel.load_ply(latest_ply(model))))
+    return models
+
+
+def resolution_scaling(args: argparse.Namespace, settings: RasterSettings) -> list[dict]:
+    """Per-step time of each model at each width (one training step: render, loss, backward)."""
+    from gaussian_renderer.renderer import render
+    from scene.dataset_readers import load_scene_info
+    from utils.losses import l1_loss, ssim
+
+    rows = []
+    models = scaling_models(args.source, args.model, args.num_random_points)
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, {platform.machine()}, "
+          f"tile {settings.tile_size}, chunk {settings.chunk_size}, view {args.view} of {args.source}")
+    print(f"{'model':8} {'gaussians':>9} {'width':>6} {'pairs':>10} {'step ms':>9} {'x prev':>7} {'pixels x':>8}")
+    for width in args.widths:
+        camera = load_scene_info(str(args.source), resolution=width).train_cameras[args.view]
+        bg = torch.zeros(3)
+        for name, gaussians in models:
+            def step() -> None:
+                out = render(camera, gaussians, bg, settings)
+                loss = 0.8 * l1_loss(out.image, camera.image) + 0.2 * (1 - ssim(out.image, camera.image))
+                loss.backward()
+                for p in gaussians.params.values():
+                    p.grad = None
+
+            proj_pairs = _pair_count(gaussians, camera, settings)
+            row = {"model": name, "gaussians": gaussians.num_gaussians, "width": camera.width,
+                   "height": camera.height, "pairs": proj_pairs, "train_step_s": median_time(step, args.repeats)}
+            prev = [r for r in rows if r["model"] == name]
+            if prev:
+                row["ratio"] = row["train_step_s"] / prev[-1]["train_step_s"]
+                row["pixel_ratio"] = camera.width * camera.height / (prev[-1]["width"] * prev[-1]["height"])
+            rows.append(row)
+            ratio = f"{row['ratio']:7.2f} {row['pixel_ratio']:8.2f}" if prev else f"{'':7} {'':8}"
+            print(f"{name:8} {row['gaussians']:9d} {camera.width:6d} {proj_pairs:10d} "
+                  f"{1e3 * row['train_step_s']:9.0f} {ratio}", flush=True)
+    return rows
+
+
+@torch.no_grad()
+def _pair_count(gaussians, camera, settings: RasterSettings) -> int:
+    """Tile-Gaussian pairs of one view (the binning's work)."""
+    from gaussian_renderer.projection import project_gaussians
+
+    proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, camera.viewmat,
+                             camera.intrinsics, camera.width, camera.height)
+    bins = bin_gaussians(proj.means2d, proj.conics, gaussians.opacities, proj.radii, proj.depths, camera.width,
+                         camera.height, settings)
+    return int((bins.lists >= 0).sum())
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--presets", nargs="+", default=["2k@128", "10k@128", "50k@128", "2k@256", "10k@256",
@@ -127,10 +207,20 @@ def main() -> None:
     parser.add_argument("--garden_points", type=int, default=50_000, help="SfM points used from the garden scene")
     parser.add_argument("--ref_max_pairs", type=float, default=4e7,
                         help="run the dense reference only when visible N x H x W is at most this (memory)")
+    parser.add_argument("--resolution_scaling", action="store_true",
+                        help="time one training step of fixed 3D Gaussians at each of --widths instead")
+    parser.add_argument("--source", type=Path, default=LEGO, help="Blender scene for --resolution_scaling")
+    parser.add_argument("--model", default=None, help="trained model directory or PLY for --resolution_scaling")
+    parser.add_argument("--widths", type=int, nargs="+", default=[200, 400, 800])
+    parser.add_argument("--view", type=int, default=0, help="training view used by --resolution_scaling")
+    parser.add_argument("--num_random_points", type=int, default=10_000, help="fresh model's points (train.py's)")
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
     settings = RasterSettings(tile_size=args.tile_size, chunk_size=args.chunk_size)
+    if args.resolution_scaling:
+        write_results("scaling", args, resolution_scaling(args, settings))
+        return
     rows = []
     for preset in args.presets:
         if preset == "garden":
@@ -153,11 +243,17 @@ def main() -> None:
         print(f"{r['preset']:9} {r['visible']:7d} {r['height']:4d}x{r['width']:<4d} {r['pairs']:9d} "
               f"{1e3 * r['forward_s']:8.1f} {1e3 * r['train_step_s']:10.1f} {1e3 * r['gram_s']:8.1f} "
               f"{r['gram_s'] / r['train_step_s']:9.2f} {ref_cols}", flush=True)
-    out = Path(__file__).parent / "results" / f"rasterize_{time.strftime('%Y%m%d_%H%M%S')}.json"
+    write_results("rasterize", args, rows)
+
+
+def write_results(kind: str, args: argparse.Namespace, rows: list[dict]) -> None:
+    """benchmarks/results/<kind>_<time>.json with the machine, torch, threads, arguments and rows."""
+    out = Path(__file__).parent / "results" / f"{kind}_{time.strftime('%Y%m%d_%H%M%S')}.json"
     out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps({"machine": platform.platform(), "processor": platform.machine(),
                                "torch": torch.__version__, "threads": torch.get_num_threads(),
-                               "args": vars(args), "rows": rows}, indent=2))
+                               "args": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
+                               "rows": rows}, indent=2))
     print(f"wrote {out}")
 
 

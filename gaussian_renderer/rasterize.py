@@ -21,6 +21,9 @@ import torch
 from gaussian_renderer.settings import RasterSettings
 
 NUM_GEOMETRY_ATTRIBUTES = 6  # mean x, mean y, conic a, b, c, opacity
+# Pixel-Gaussian pairs evaluated at once (tiles x chunk_size x tile_size^2): a few MB per pair tensor, so the
+# chunk's ~20 temporaries stay cache-sized at any resolution (benchmarks/bench_rasterize.py --resolution_scaling).
+MAX_CHUNK_PAIRS = 1 << 18
 
 
 @dataclass
@@ -116,41 +119,57 @@ def _iterate_chunks(bins: TileBins, means2d: torch.Tensor, conics: torch.Tensor,
 
     Only tiles that still have Gaussians at this depth and an unfinished pixel take part in a chunk, so short
     tile lists and saturated tiles cost nothing. Pair tensors are laid out [tiles, depth, pixels] so that sums
-    over a tile's pixels run over contiguous memory.
+    over a tile's pixels run over contiguous memory. The active tiles of one depth step are split into groups of
+    at most `MAX_CHUNK_PAIRS` pixel-Gaussian pairs, so the working set stays the same size at any resolution
+    (one [all tiles, chunk, pixels] tensor grows with the image and turns memory-bound). Groups hold disjoint
+    tiles and every tile still sees its chunks front to back, so the result does not depend on the grouping.
     """
     num_tiles, num_pixels = bins.pixel_valid.shape
     dtype, device = means2d.dtype, means2d.device
+    group = max(1, MAX_CHUNK_PAIRS // (settings.chunk_size * num_pixels))  # tiles per group
     trans = torch.ones(num_tiles, num_pixels, dtype=dtype, device=device)  # real transmittance
     trans_test = trans.clone()  # transmittance with every alpha, for the early-stop test (monotone)
     for start in range(0, bins.lists.shape[1], settings.chunk_size):
         unfinished = (trans_test >= settings.transmittance_min) & bins.pixel_valid  # [T, P]
-        tiles = torch.nonzero((bins.lists[:, start] >= 0) & unfinished.any(dim=1)).squeeze(1)
-        if tiles.numel() == 0:
+        active = torch.nonzero((bins.lists[:, start] >= 0) & unfinished.any(dim=1)).squeeze(1)
+        if active.numel() == 0:
             break
-        ids = bins.lists[tiles, start:start + settings.chunk_size]  # [Ta, c]
-        safe = ids.clamp_min(0)
-        mean, conic, opacity = means2d[safe], conics[safe], opacities[safe]  # [Ta,c,2], [Ta,c,3], [Ta,c]
-        pixels = bins.pixels[tiles]  # [Ta, P, 2]
-        dx = pixels[:, None, :, 0] - mean[..., 0:1]  # [Ta, c, P]
-        dy = pixels[:, None, :, 1] - mean[..., 1:2]
-        power = -0.5 * (conic[..., 0:1] * dx * dx + conic[..., 2:3] * dy * dy) - conic[..., 1:2] * dx * dy
-        gauss = torch.exp(power)
-        raw = opacity[..., None] * gauss
-        alpha = raw.clamp_max(settings.alpha_max)
-        live = ((ids >= 0)[..., None] & (power <= 0) & (alpha >= settings.alpha_min)
-                & bins.pixel_valid[tiles][:, None, :])
-        alpha = torch.where(live, alpha, torch.zeros_like(alpha))
+        for tiles in active.split(group):
+            chunk, cum, cum_test = _chunk_pairs(bins, tiles, start, means2d, conics, opacities, trans, trans_test,
+                                                settings)
+            yield chunk
+            trans[tiles] = trans[tiles] * cum[:, -1]
+            trans_test[tiles] = cum_test[:, -1]
+
+
+def _chunk_pairs(bins: TileBins, tiles: torch.Tensor, start: int, means2d: torch.Tensor, conics: torch.Tensor,
+                 opacities: torch.Tensor, trans: torch.Tensor, trans_test: torch.Tensor,
+                 settings: RasterSettings) -> tuple[ChunkPairs, torch.Tensor, torch.Tensor]:
+    """The pairs of `tiles` [Ta] at list positions start .. start + chunk_size, given the transmittances [T, P]
+    in front of them; also returns the running products of (1 - alpha) [Ta, c, P], real and for the stop test."""
+    ids = bins.lists[tiles, start:start + settings.chunk_size]  # [Ta, c]
+    safe = ids.clamp_min(0)
+    mean, conic, opacity = means2d[safe], conics[safe], opacities[safe]  # [Ta,c,2], [Ta,c,3], [Ta,c]
+    pixels = bins.pixels[tiles]  # [Ta, P, 2]
+    dx = pixels[:, None, :, 0] - mean[..., 0:1]  # [Ta, c, P]
+    dy = pixels[:, None, :, 1] - mean[..., 1:2]
+    power = -0.5 * (conic[..., 0:1] * dx * dx + conic[..., 2:3] * dy * dy) - conic[..., 1:2] * dx * dy
+    gauss = torch.exp(power)
+    raw = opacity[..., None] * gauss
+    alpha = raw.clamp_max(settings.alpha_max)
+    live = ((ids >= 0)[..., None] & (power <= 0) & (alpha >= settings.alpha_min)
+            & bins.pixel_valid[tiles][:, None, :])
+    alpha = torch.where(live, alpha, torch.zeros_like(alpha))
+    cum = torch.cumprod(1 - alpha, dim=1)
+    cum_test = trans_test[tiles][:, None, :] * cum
+    stop = cum_test < settings.transmittance_min  # this pair and all behind it in the pixel are skipped
+    if bool(stop.any()):
+        alpha = torch.where(stop, torch.zeros_like(alpha), alpha)
         cum = torch.cumprod(1 - alpha, dim=1)
-        cum_test = trans_test[tiles][:, None, :] * cum
-        stop = cum_test < settings.transmittance_min  # this pair and all behind it in the pixel are skipped
-        if bool(stop.any()):
-            alpha = torch.where(stop, torch.zeros_like(alpha), alpha)
-            cum = torch.cumprod(1 - alpha, dim=1)
-        front = trans[tiles][:, None, :] * torch.cat([torch.ones_like(cum[:, :1]), cum[:, :-1]], dim=1)
-        yield ChunkPairs(tiles, ids, alpha, (alpha > 0) & (raw < settings.alpha_max), gauss, dx, dy, front,
-                         alpha * front)
-        trans[tiles] = trans[tiles] * cum[:, -1]
-        trans_test[tiles] = cum_test[:, -1]
+    front = trans[tiles][:, None, :] * torch.cat([torch.ones_like(cum[:, :1]), cum[:, :-1]], dim=1)
+    chunk = ChunkPairs(tiles, ids, alpha, (alpha > 0) & (raw < settings.alpha_max), gauss, dx, dy, front,
+                       alpha * front)
+    return chunk, cum, cum_test
 
 
 def _to_image(values: torch.Tensor, bins: TileBins, width: int, height: int) -> torch.Tensor:

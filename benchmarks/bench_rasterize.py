@@ -16,7 +16,7 @@ of the rasterizer), the dense reference forward+backward (only where N x H x W <
 `--resolution_scaling` times instead one whole training step (render forward + L1/SSIM loss + backward) of a
 fixed set of 3D Gaussians from one view of a Blender scene (`--source`, default ../shared/data/lego) at each of
 `--widths`, for two models: train.py's fresh random initialisation (`--num_random_points`, seed 0) and, with
-`--model`, a trained one (a model directory or a PLY). The ratio column is the step time over the previous
+`--model`, a trained one (a train.py model directory, its newest iteration). The ratio column is the step time over the previous
 width's; with the pixel count growing 4x per doubling, a ratio near 4 means the cost is linear in pixels.
 """
 from __future__ import annotations
@@ -123,27 +123,16 @@ def bench(name: str, inputs: Inputs, settings: RasterSettings, repeats: int, ref
     return row
 
 
-def latest_ply(model: str) -> Path:
-    """`model` itself when it is a PLY, else the newest point_cloud/iteration_N/point_cloud.ply under it."""
-    path = Path(model)
-    if path.suffix == ".ply":
-        return path
-    plys = sorted(path.glob("point_cloud/iteration_*/point_cloud.ply"), key=lambda p: int(p.parent.name.split("_")[1]))
-    if not plys:
-        raise SystemExit(f"no point_cloud/iteration_N/point_cloud.ply under {path}; pass a trained model directory")
-    return plys[-1]
-
-
 def scaling_models(source: Path, model: str | None, num_points: int) -> list[tuple[str, object]]:
     """(name, GaussianModel) pairs: train.py's fresh random initialisation and, when given, a trained model."""
-    from scene.gaussian_model import GaussianModel
     from scene.scene import Scene
+    from scene.trained import load_trained
 
     scene = Scene.load(str(source), Path("unused"), white_background=False, resolution=8, eval=False)
     init = scene.initial_point_cloud(num_points, seed=0)
     models = [("fresh", scene.new_gaussians(init, sh_degree=3, device="cpu"))]
     if model:
-        models.append(("trained", GaussianModel.load_ply(latest_ply(model))))
+        models.append(("trained", load_trained(model).gaussians))
     return models
 
 
@@ -210,7 +199,7 @@ def main() -> None:
     parser.add_argument("--resolution_scaling", action="store_true",
                         help="time one training step of fixed 3D Gaussians at each of --widths instead")
     parser.add_argument("--source", type=Path, default=LEGO, help="Blender scene for --resolution_scaling")
-    parser.add_argument("--model", default=None, help="trained model directory or PLY for --resolution_scaling")
+    parser.add_argument("--model", default=None, help="trained model directory for --resolution_scaling")
     parser.add_argument("--widths", type=int, nargs="+", default=[200, 400, 800])
     parser.add_argument("--view", type=int, default=0, help="training view used by --resolution_scaling")
     parser.add_argument("--num_random_points", type=int, default=10_000, help="fresh model's points (train.py's)")

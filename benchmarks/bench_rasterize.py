@@ -16,8 +16,8 @@ of the rasterizer), the dense reference forward+backward (only where N x H x W <
 `--resolution_scaling` times instead one whole training step (render forward + L1/SSIM loss + backward) of a
 fixed set of 3D Gaussians from one view of a Blender scene (`--source`, default ../shared/data/lego) at each of
 `--widths`, for two models: train.py's fresh random initialisation (`--num_random_points`, seed 0) and, with
-`--model`, a trained one (a train.py model directory, its newest iteration). The ratio column is the step time over the previous
-width's; with the pixel count growing 4x per doubling, a ratio near 4 means the cost is linear in pixels.
+`--model`, a trained one (a train.py model directory, its newest iteration). The ratio column is the step time over
+the previous width's; with the pixel count growing 4x per doubling, a ratio near 4 means the cost is linear in pixels.
 """
 from __future__ import annotations
 

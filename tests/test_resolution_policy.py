@@ -62,7 +62,8 @@ def test_train_records_the_effective_resolution(tiny_scene, tmp_path):
     assert json.loads((tmp_path / "m" / "cameras.json").read_text())[0]["width"] == 16
 
 
-@pytest.mark.parametrize("flags, names", [(["-r", "4"], ["-r 4", "8x8"]), (["--cpu_max_width", "0"], ["--cpu_max_width"])])
+@pytest.mark.parametrize("flags, names", [(["-r", "4"], ["-r 4", "8x8"]),
+                                          (["--cpu_max_width", "0"], ["--cpu_max_width"])])
 def test_train_rejects_bad_values_with_one_line(tiny_scene, tmp_path, flags, names):
     r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(tmp_path / "m"), "--quiet", *flags)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and r.stderr.startswith("error:"), r.stderr

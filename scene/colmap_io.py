@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scene.lens import Lens
 from utils.errors import UserError
 
 # model id -> (name, number of parameters)
@@ -165,16 +166,27 @@ def qvec_to_rotmat(q: np.ndarray) -> np.ndarray:
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
-def pinhole_intrinsics(cam: ColmapCamera) -> tuple[float, float, float, float, bool]:
-    """(fx, fy, cx, cy, distorted) treating every supported model as a pinhole (distortion ignored)."""
-    p = cam.params
+def camera_lens(cam: ColmapCamera) -> Lens:
+    """The `Lens` of a COLMAP camera (calibrated pixels): pinhole models without, radial/OpenCV ones with
+    distortion coefficients in OpenCV's order."""
+    p = [float(v) for v in cam.params]
     expected = MODEL_IDS.get(cam.model, (None, len(p)))[1]
     if len(p) != expected:
         raise UserError(f"COLMAP camera {cam.id} ({cam.model}) has {len(p)} parameters, expected {expected}; "
                         "re-export the model from COLMAP")
-    if cam.model in ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL"):
-        return float(p[0]), float(p[0]), float(p[1]), float(p[2]), cam.model != "SIMPLE_PINHOLE"
-    if cam.model in ("PINHOLE", "OPENCV"):
-        return float(p[0]), float(p[1]), float(p[2]), float(p[3]), cam.model == "OPENCV"
-    raise UserError(f"COLMAP camera {cam.id} uses model {cam.model}; supported: PINHOLE, SIMPLE_PINHOLE, "
-                    "SIMPLE_RADIAL, RADIAL, OPENCV (undistort the images with COLMAP first)")
+    w, h = cam.width, cam.height
+    if cam.model == "SIMPLE_PINHOLE":
+        return Lens(w, h, p[0], p[0], p[1], p[2])
+    if cam.model == "SIMPLE_RADIAL":
+        return Lens(w, h, p[0], p[0], p[1], p[2], "OPENCV", (p[3], 0.0, 0.0, 0.0))
+    if cam.model == "RADIAL":
+        return Lens(w, h, p[0], p[0], p[1], p[2], "OPENCV", (p[3], p[4], 0.0, 0.0))
+    if cam.model == "PINHOLE":
+        return Lens(w, h, *p)
+    if cam.model in ("OPENCV", "FULL_OPENCV"):  # (k1, k2, p1, p2[, k3, k4, k5, k6]): OpenCV's own order
+        return Lens(w, h, *p[:4], "OPENCV", tuple(p[4:]))
+    if cam.model == "OPENCV_FISHEYE":
+        return Lens(w, h, *p[:4], "OPENCV_FISHEYE", tuple(p[4:]))
+    raise UserError(f"COLMAP camera {cam.id} uses model {cam.model}; supported: SIMPLE_PINHOLE, PINHOLE, "
+                    "SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV, OPENCV_FISHEYE (undistort the images with COLMAP "
+                    "first)")

@@ -88,3 +88,31 @@ def load_ply(path: str | os.PathLike) -> tuple[dict[str, torch.Tensor], int]:
         "quats": cols([f"rot_{i}" for i in range(4)]),
     }
     return params, degree
+
+
+def load_points_ply(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """A point cloud PLY (SfM points: x y z and optional red green blue, as COLMAP and nerfstudio write them).
+
+    Points without colours are grey. An unreadable file, or one without x/y/z, is a one-line `UserError`.
+    Returns:
+        (xyz [P, 3] float64, rgb [P, 3] uint8)
+    """
+    try:
+        ply = PlyData.read(str(path))
+        vertex = ply["vertex"]
+        names = {p.name for p in vertex.properties}
+        if not {"x", "y", "z"} <= names:
+            raise UserError(f"points file {path} has no x/y/z vertex properties; point to a point cloud PLY")
+        xyz = np.stack([np.asarray(vertex[k], dtype=np.float64) for k in ("x", "y", "z")], axis=1)
+        if {"red", "green", "blue"} <= names:
+            rgb = np.stack([np.asarray(vertex[k]) for k in ("red", "green", "blue")], axis=1).astype(np.uint8)
+        else:
+            rgb = np.full((len(xyz), 3), 128, dtype=np.uint8)
+    except UserError:
+        raise
+    except Exception as exc:  # plyfile raises many types for a damaged header or body
+        raise UserError(f"cannot read points file {path} ({type(exc).__name__}: {exc}); the file is corrupt or "
+                        "truncated, regenerate it") from None
+    if not len(xyz) or not np.isfinite(xyz).all():
+        raise UserError(f"points file {path} has no points or non-finite coordinates; regenerate it")
+    return xyz, rgb

@@ -13,9 +13,11 @@ from PIL import Image
 
 from scene import colmap_io
 from scene.dataset_readers import load_scene_info
+from scene.lens import Lens, Undistorter
 from utils.errors import UserError
 
-MODEL_IDS = {"SIMPLE_PINHOLE": 0, "PINHOLE": 1, "SIMPLE_RADIAL": 2, "RADIAL": 3, "OPENCV": 4, "OPENCV_FISHEYE": 5}
+MODEL_IDS = {"SIMPLE_PINHOLE": 0, "PINHOLE": 1, "SIMPLE_RADIAL": 2, "RADIAL": 3, "OPENCV": 4, "OPENCV_FISHEYE": 5,
+             "FULL_OPENCV": 6}
 
 
 # ------------------------------------------------------------------------------------ writers (COLMAP formats)
@@ -112,23 +114,29 @@ def test_qvec_to_rotmat():
         np.testing.assert_allclose(colmap_io.qvec_to_rotmat(q) @ v, quat_rotate(q, v), atol=1e-12)
 
 
-@pytest.mark.parametrize("model, params, expected, distorted", [
-    ("SIMPLE_PINHOLE", (50.0, 20.0, 10.0), (50.0, 50.0, 20.0, 10.0), False),
-    ("PINHOLE", (50.0, 55.0, 20.0, 10.0), (50.0, 55.0, 20.0, 10.0), False),
-    ("SIMPLE_RADIAL", (50.0, 20.0, 10.0, 0.1), (50.0, 50.0, 20.0, 10.0), True),
-    ("RADIAL", (50.0, 20.0, 10.0, 0.1, 0.01), (50.0, 50.0, 20.0, 10.0), True),
-    ("OPENCV", (50.0, 55.0, 20.0, 10.0, 0.1, 0.01, 0.0, 0.0), (50.0, 55.0, 20.0, 10.0), True),
+@pytest.mark.parametrize("model, params, intrinsics, lens_model, dist", [
+    ("SIMPLE_PINHOLE", (50.0, 20.0, 10.0), (50.0, 50.0, 20.0, 10.0), "OPENCV", ()),
+    ("PINHOLE", (50.0, 55.0, 20.0, 10.0), (50.0, 55.0, 20.0, 10.0), "OPENCV", ()),
+    ("SIMPLE_RADIAL", (50.0, 20.0, 10.0, 0.1), (50.0, 50.0, 20.0, 10.0), "OPENCV", (0.1, 0.0, 0.0, 0.0)),
+    ("RADIAL", (50.0, 20.0, 10.0, 0.1, 0.01), (50.0, 50.0, 20.0, 10.0), "OPENCV", (0.1, 0.01, 0.0, 0.0)),
+    ("OPENCV", (50.0, 55.0, 20.0, 10.0, 0.1, 0.01, 0.002, 0.003), (50.0, 55.0, 20.0, 10.0), "OPENCV",
+     (0.1, 0.01, 0.002, 0.003)),
+    ("FULL_OPENCV", (50.0, 55.0, 20.0, 10.0, *range(1, 9)), (50.0, 55.0, 20.0, 10.0), "OPENCV",
+     tuple(float(v) for v in range(1, 9))),
+    ("OPENCV_FISHEYE", (50.0, 55.0, 20.0, 10.0, 0.1, 0.01, 0.002, 0.003), (50.0, 55.0, 20.0, 10.0),
+     "OPENCV_FISHEYE", (0.1, 0.01, 0.002, 0.003)),
 ])
-def test_camera_models(model, params, expected, distorted):
-    cam = colmap_io.ColmapCamera(3, model, 40, 20, np.array(params))
-    assert colmap_io.pinhole_intrinsics(cam) == (*expected, distorted)
+def test_camera_models(model, params, intrinsics, lens_model, dist):
+    lens = colmap_io.camera_lens(colmap_io.ColmapCamera(3, model, 40, 20, np.array(params, dtype=float)))
+    assert (lens.width, lens.height, lens.fx, lens.fy, lens.cx, lens.cy) == (40, 20, *intrinsics)
+    assert (lens.model, lens.dist) == (lens_model, dist)
 
 
 def test_unsupported_model_and_wrong_param_count():
-    with pytest.raises(UserError, match="OPENCV_FISHEYE.*undistort"):
-        colmap_io.pinhole_intrinsics(colmap_io.ColmapCamera(3, "OPENCV_FISHEYE", 40, 20, np.zeros(8)))
+    with pytest.raises(UserError, match="FOV.*undistort"):
+        colmap_io.camera_lens(colmap_io.ColmapCamera(3, "FOV", 40, 20, np.zeros(5)))
     with pytest.raises(UserError, match=r"camera 3 \(PINHOLE\) has 3 parameters, expected 4"):
-        colmap_io.pinhole_intrinsics(colmap_io.ColmapCamera(3, "PINHOLE", 40, 20, np.zeros(3)))
+        colmap_io.camera_lens(colmap_io.ColmapCamera(3, "PINHOLE", 40, 20, np.zeros(3)))
 
 
 def test_incomplete_and_truncated_models(tmp_path):
@@ -191,12 +199,15 @@ def test_llffhold_split(tmp_path):
         load_scene_info(str(tmp_path), eval=True, llffhold=0)
 
 
-def test_distorted_models_warn_once(tmp_path, caplog):
-    write_colmap_scene(tmp_path, 3, "SIMPLE_RADIAL", (50.0, 20.0, 10.0, 0.1))
-    with caplog.at_level(logging.WARNING, logger="scene.dataset_readers"):
-        info = load_scene_info(str(tmp_path))
-    assert len([r for r in caplog.records if "distortion" in r.getMessage()]) == 1
-    assert info.train_cameras[0].fx == info.train_cameras[0].fy == 50.0
+def test_distorted_models_are_undistorted_to_pinhole(tmp_path):
+    write_colmap_scene(tmp_path, 3, "SIMPLE_RADIAL", (50.0, 20.0, 10.0, -0.1))
+    cam = load_scene_info(str(tmp_path)).train_cameras[0]
+    expected = Undistorter(Lens(40, 20, 50.0, 50.0, 20.0, 10.0, "OPENCV", (-0.1, 0.0, 0.0, 0.0)), "t").pinhole
+    assert (cam.fx, cam.fy, cam.cx, cam.cy) == pytest.approx((expected.fx, expected.fy, expected.cx, expected.cy))
+    assert cam.fx < 50.0  # barrel distortion: even the cropped (no-border) pinhole sees a wider field
+    assert len(list((tmp_path / ".undistorted").rglob("*.png"))) == 3  # cached beside the dataset
+    raw = load_scene_info(str(tmp_path), ignore_distortion=True).train_cameras[0]
+    assert (raw.fx, raw.cx) == (50.0, 20.0)
 
 
 def test_resolution_and_stored_size(tmp_path):
@@ -213,5 +224,9 @@ def test_resolution_and_stored_size(tmp_path):
 def test_missing_image_file(tmp_path):
     images = write_colmap_scene(tmp_path, 2)
     (tmp_path / "images" / images[1][4]).unlink()
-    with pytest.raises(UserError, match=f"COLMAP image {images[1][4]}: image file .* is missing"):
+    with pytest.raises(UserError, match=f"1 of 2 listed images are missing \\({images[1][4]}; first listed at "
+                                        f"COLMAP image {images[1][4]}\\).*--skip_missing_images"):
         load_scene_info(str(tmp_path))
+    info = load_scene_info(str(tmp_path), skip_missing_images=True)
+    assert [c.image_name for c in info.train_cameras] == [Path(images[0][4]).stem]
+    assert info.dropped_images == [images[1][4]]

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import math
 from pathlib import Path
 
@@ -188,11 +189,36 @@ def test_malformed_json(tmp_path):
         load_scene_info(str(root))
 
 
-def test_missing_image_names_frame_and_path(tmp_path):
+def test_missing_images_error_or_skip(tmp_path, caplog):
     root = write_blender(tmp_path)
     (root / "train" / "r_1.png").unlink()
-    with pytest.raises(UserError, match=r"transforms_train\.json frame 1: image file .*train/r_1\.png is missing"):
+    with pytest.raises(UserError, match=r"1 of 3 listed images are missing \(train/r_1\.png; first listed at "
+                                        r"transforms_train\.json frame 1\).*--skip_missing_images"):
         load_scene_info(str(root))
+    with caplog.at_level(logging.WARNING):
+        info = load_scene_info(str(root), skip_missing_images=True)
+    assert [c.image_name for c in info.train_cameras] == ["r_0"] and len(info.test_cameras) == 1
+    assert info.dropped_images == ["train/r_1.png"]
+    assert any("dropped 1 of 3" in r.getMessage() for r in caplog.records)
+
+
+def test_many_missing_images_name_the_first_few(tmp_path):
+    root = write_blender(tmp_path, train=(C2W_A, C2W_B, C2W_A, C2W_B, C2W_A))
+    for i in range(1, 5):
+        (root / "train" / f"r_{i}.png").unlink()
+    with pytest.raises(UserError, match=r"^4 of 6 listed images are missing \(train/r_1\.png, train/r_2\.png, "
+                                        r"train/r_3\.png, \.\.\.;"):
+        load_scene_info(str(root))
+
+
+def test_truncated_image_is_one_line(tmp_path):
+    root = write_blender(tmp_path)
+    data = (root / "train" / "r_1.png").read_bytes()
+    (root / "train" / "r_1.png").write_bytes(data[: len(data) // 2])  # header intact, pixels cut short
+    with pytest.raises(UserError, match=r"transforms_train\.json frame 1: cannot read image .*r_1\.png "
+                                        r"\(.*truncated.*\); the file is truncated or corrupt") as err:
+        load_scene_info(str(root))
+    assert "\n" not in str(err.value)
 
 
 def test_unreadable_image(tmp_path):

@@ -277,9 +277,7 @@ def open_run(cfg: TrainConfig, model_path: str) -> Run:
         cfg = replace(cfg, model=replace(cfg.model, resolution=resolution.resolution))
         if resolution.notice:
             print(resolution.notice)
-    scene = Scene.load(cfg.model.source_path, model_path, white_background=cfg.model.white_background,
-                       resolution=cfg.model.resolution, eval=cfg.model.eval, images=cfg.model.images,
-                       device=cfg.model.device)
+    scene = Scene.from_config(cfg.model, model_path)
     plan = make_plan(cfg, len(scene.train_cameras))
     seed_everything(cfg.run.seed)
     rng = random.Random(cfg.run.seed)
@@ -293,7 +291,7 @@ def open_run(cfg: TrainConfig, model_path: str) -> Run:
     else:
         train_views = seed_views(scene, cfg) if cfg.active.method else list(range(len(scene.train_cameras)))
         state = fresh_state(scene, cfg, train_views, plan.total_iterations)
-        run_dir.start({**cfg.to_dict(), "total_iterations": plan.total_iterations})
+        run_dir.start({**cfg.to_dict(), "total_iterations": plan.total_iterations, "dataset": scene.dataset_record()})
         scene.write_cameras_json()
         state.gaussians.save_ply(Path(model_path) / "input.ply")
         if plan.adds and plan.adds[-1] != cfg.active.views_per_step:

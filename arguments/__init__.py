@@ -24,7 +24,7 @@ def _flag(short: str | None = None, help: str = "", choices: tuple | None = None
 class ModelConfig:
     """Where the data and the outputs are, and how the scene is loaded."""
 
-    source_path: str = field(default="", metadata=_flag("-s", "dataset directory (Blender or COLMAP layout)"))
+    source_path: str = field(default="", metadata=_flag("-s", "dataset directory (Blender, nerfstudio transforms.json or COLMAP layout)"))
     model_path: str = field(default="", metadata=_flag(
         "-m", "output directory (default output/<scene name>; output/<scene name>_<method> for an active run)"))
     images: str = field(default="images", metadata=_flag("-i", "COLMAP image folder name"))
@@ -32,12 +32,14 @@ class ModelConfig:
         "-r", "1/2/4/8 = downscale factor, other >0 = target width, -1 = as is up to --cpu_max_width on the CPU, "
         "1600 px on CUDA"))
     white_background: bool = field(default=False, metadata=_flag("-w", "composite RGBA on white (Blender)"))
-    eval: bool = field(default=False, metadata=_flag(None, "hold out test views (COLMAP: every 8th; Blender: transforms_test)"))
+    eval: bool = field(default=False, metadata=_flag(None, "hold out test views (COLMAP, transforms.json: every 8th; Blender: transforms_test)"))
     sh_degree: int = field(default=3, metadata=_flag(None, "maximum spherical-harmonics degree"))
-    num_random_points: int = field(default=10_000, metadata=_flag(None, "random initial points for synthetic (Blender) scenes"))
+    num_random_points: int = field(default=10_000, metadata=_flag(None, "random initial points when the dataset has none (Blender; transforms.json without a point file)"))
     device: str = field(default="cpu", metadata=_flag(None, "torch device", ("cpu", "cuda")))
     cpu_max_width: int = field(default=200, metadata=_flag(
         None, "without -r, a CPU run trains on images at most this many px wide (downscale 2/4/8, else this width)"))
+    skip_missing_images: bool = field(default=False, metadata=_flag(None, "train on the listed frames whose image exists (default: error when any is missing)"))
+    ignore_distortion: bool = field(default=False, metadata=_flag(None, "treat distorted lenses as pinholes instead of undistorting the images (for comparisons)"))
 
 
 @dataclass(frozen=True)

@@ -90,15 +90,18 @@ def _read_stamp(stamp: Path) -> dict | None:
         return None
 
 
-def _render_splits(out: Path, seed: int, resolution: int, num_train: int, num_test: int) -> None:
-    """Render the scene's Gaussians from every camera; write the RGBA PNGs and both transforms files."""
-    g = torch.Generator().manual_seed(seed)
-    means, colors, scales = _object_points(g)
+def scene_gaussians(seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The scene as rasterizer inputs: means [N,3], quats [N,4], scales [N,3], opacities [N], colours [N,3]."""
+    means, colors, scales = _object_points(torch.Generator().manual_seed(seed))
     n = means.shape[0]
     quats = torch.zeros(n, 4)
     quats[:, 0] = 1
-    opacities = torch.full((n,), 0.9)
-    scales3 = scales[:, None].repeat(1, 3)  # isotropic [N, 3]
+    return means, quats, scales[:, None].repeat(1, 3), torch.full((n,), 0.9), colors  # isotropic scales
+
+
+def _render_splits(out: Path, seed: int, resolution: int, num_train: int, num_test: int) -> None:
+    """Render the scene's Gaussians from every camera; write the RGBA PNGs and both transforms files."""
+    means, quats, scales3, opacities, colors = scene_gaussians(seed)
     focal = 0.5 * resolution / math.tan(0.5 * CAMERA_ANGLE_X)
     intrinsics = torch.tensor([focal, focal, resolution / 2, resolution / 2])
     for split, count, offset in (("train", num_train, 0.5), ("test", num_test, 0.25)):

@@ -29,6 +29,8 @@ LENS_MODELS = ("OPENCV", "OPENCV_FISHEYE")
 # new focal length leaves this range relative to the old one: both mean the coefficients do not describe a lens.
 MIN_VALID_FRACTION = 0.98
 FOCAL_RATIO_RANGE = (0.25, 4.0)
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+ROUND_TRIP_PX = 0.5  # undistort-then-distort must land within this many pixels of where it started
 
 
 @dataclass(frozen=True)
@@ -78,12 +80,14 @@ def pixel_grid(width: int, height: int) -> np.ndarray:
     return np.stack([xs.ravel(), ys.ravel()], axis=1)[:, None, :]
 
 
-def undistort_points(lens: Lens, points: np.ndarray, target: Lens) -> np.ndarray:
-    """Pixels of the distorted `lens` [M, 1, 2] (OpenCV coordinates) -> pixels of the pinhole `target`. [M, 1, 2]"""
+def undistort_points(lens: Lens, points: np.ndarray, target: Lens | None = None) -> np.ndarray:
+    """Pixels of the distorted `lens` [M, 1, 2] (OpenCV coordinates) -> pixels of the pinhole `target`, or
+    normalized coordinates without one. Iterated to convergence (OpenCV's default stops after 5 steps). [M, 1, 2]"""
     dist = np.array(lens.dist, dtype=np.float64)
+    p = None if target is None else target.cv_matrix()
     if lens.model == "OPENCV_FISHEYE":
-        return cv2.fisheye.undistortPoints(points, lens.cv_matrix(), dist, P=target.cv_matrix())
-    return cv2.undistortPoints(points, lens.cv_matrix(), dist, P=target.cv_matrix())
+        return cv2.fisheye.undistortPoints(points, lens.cv_matrix(), dist, R=None, P=p, criteria=UNDISTORT_CRITERIA)
+    return cv2.undistortPoints(points, lens.cv_matrix(), dist, R=None, P=p, criteria=UNDISTORT_CRITERIA)
 
 
 class Undistorter:
@@ -112,8 +116,15 @@ class Undistorter:
         self._check(where)
 
     def _check(self, where: str) -> None:
-        """Refuse coefficients whose undistortion is degenerate (see MIN_VALID_FRACTION, FOCAL_RATIO_RANGE)."""
+        """Refuse coefficients whose undistortion is degenerate: the distortion does not invert on the frame
+        (it folds over, so undistorting then distorting again misses by more than ROUND_TRIP_PX), or the pinhole
+        it gives is implausible (see MIN_VALID_FRACTION, FOCAL_RATIO_RANGE)."""
         p, lens = self.pinhole, self.lens
+        error = round_trip_error(lens)
+        if not error <= ROUND_TRIP_PX:
+            raise UserError(f"{where}: undistortion failed for {lens.model} coefficients {list(lens.dist)}: the "
+                            f"lens model folds over inside the {lens.width}x{lens.height} frame (round trip off by "
+                            f"{error:.3g} px); check the distortion parameters or pass --ignore_distortion")
         ratio = p.fx / lens.fx if np.isfinite(p.fx) else float("nan")
         inside = ((self.map_x >= -0.5) & (self.map_x <= lens.width - 0.5) & (self.map_y >= -0.5)
                   & (self.map_y <= lens.height - 0.5))
@@ -129,6 +140,22 @@ class Undistorter:
         assert image.shape[:2] == (self.lens.height, self.lens.width), (image.shape, self.lens)
         return cv2.remap(image, self.map_x, self.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                          borderValue=0)
+
+
+def round_trip_error(lens: Lens, samples: int = 24) -> float:
+    """Largest pixel error of distort(undistort(x)) over a `samples` x `samples` grid and the frame's border."""
+    xs, ys = np.linspace(0, lens.width - 1, samples), np.linspace(0, lens.height - 1, samples)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 1, 2)  # [S*S, 1, 2]
+    k, dist = lens.cv_matrix(), np.array(lens.dist, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        normalized = undistort_points(lens, grid)  # [M, 1, 2]
+        if lens.model == "OPENCV_FISHEYE":
+            back = cv2.fisheye.distortPoints(normalized, k, dist)
+        else:
+            points = np.concatenate([normalized[:, 0], np.ones((len(grid), 1))], axis=1)  # [M, 3]
+            back, _ = cv2.projectPoints(points, np.zeros(3), np.zeros(3), k, dist)
+        error = np.abs(back.reshape(-1, 2) - grid.reshape(-1, 2)).max()
+    return float(error) if np.isfinite(error) else float("inf")
 
 
 def distortion_maps(lens: Lens, source: Lens) -> tuple[np.ndarray, np.ndarray]:

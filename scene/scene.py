@@ -8,6 +8,7 @@ from pathlib import Path
 
 import torch
 
+from arguments import ModelConfig
 from scene.cameras import Camera
 from scene.dataset_readers import PointCloud, SceneInfo, load_scene_info
 from scene.gaussian_model import GaussianModel
@@ -31,11 +32,27 @@ class Scene:
 
     @classmethod
     def load(cls, source_path: str, model_path: str | os.PathLike, *, white_background: bool, resolution: int,
-             eval: bool, images: str = "images", device: str = "cpu") -> "Scene":
-        """Read a Blender or COLMAP dataset (raises `UserError` on bad input)."""
+             eval: bool, images: str = "images", device: str = "cpu", skip_missing_images: bool = False,
+             ignore_distortion: bool = False) -> "Scene":
+        """Read a Blender, nerfstudio or COLMAP dataset (raises `UserError` on bad input)."""
         info = load_scene_info(source_path, white_background=white_background, resolution=resolution,
-                               eval=eval, images=images, device=device)
+                               eval=eval, images=images, device=device, skip_missing_images=skip_missing_images,
+                               ignore_distortion=ignore_distortion)
         return cls(info, Path(model_path))
+
+    @classmethod
+    def from_config(cls, model: ModelConfig, model_path: str | os.PathLike, source_path: str | None = None,
+                    device: str | torch.device | None = None) -> "Scene":
+        """`load` with the dataset options of a `ModelConfig` (`source_path`, `device` override the config's)."""
+        return cls.load(source_path or model.source_path, model_path, white_background=model.white_background,
+                        resolution=model.resolution, eval=model.eval, images=model.images,
+                        device=device or model.device, skip_missing_images=model.skip_missing_images,
+                        ignore_distortion=model.ignore_distortion)
+
+    def dataset_record(self) -> dict:
+        """What the loader did with the dataset, for cfg_args: its kind and the frames dropped as missing."""
+        return {"kind": self.info.kind, "num_train": len(self.train_cameras), "num_test": len(self.test_cameras),
+                "dropped_images": list(self.info.dropped_images)}
 
     @property
     def train_cameras(self) -> list[Camera]:
@@ -53,6 +70,9 @@ class Scene:
         """SfM points when the dataset has them, else uniform random points in a cube around the origin."""
         if self.info.point_cloud is not None:
             return self.info.point_cloud
+        if self.info.kind != "blender":  # synthetic scenes start from random points by design; say so for others
+            log.info("no initial point file in the dataset (sparse_pc.ply, ply_file_path or points3D): starting "
+                     "from %d random points", num_random_points)
         centers = torch.stack([c.camera_center for c in self.train_cameras])  # [V, 3]
         radius = float(centers.norm(dim=-1).mean())
         half = BLENDER_RANDOM_CUBE_HALF_SIZE * radius / BLENDER_CAMERA_RADIUS
@@ -66,8 +86,12 @@ class Scene:
         return GaussianModel.from_point_cloud(point_cloud.points, point_cloud.colors, sh_degree, device=device)
 
     def write_cameras_json(self) -> None:
-        """`cameras.json` in the 3DGS format (train cameras; `id` is the view id used in selection.json)."""
-        write_json(self.model_path / "cameras.json", [c.to_json(i) for i, c in enumerate(self.train_cameras)])
+        """`cameras.json` as 3DGS writes it: test cameras, then training cameras, `id` their index in that list.
+
+        The training view with view id v (selection.json, --init_views) therefore has id `len(test_cameras) + v`.
+        """
+        cameras = self.test_cameras + self.train_cameras
+        write_json(self.model_path / "cameras.json", [c.to_json(i) for i, c in enumerate(cameras)])
 
     def save_gaussians(self, gaussians: GaussianModel, iteration: int) -> Path:
         """Write `point_cloud/iteration_N/point_cloud.ply` and return its path."""

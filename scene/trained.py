@@ -80,8 +80,7 @@ def load_trained(model_path: str | Path, iteration: int = -1, source_path: str |
     model_cfg, pipeline_cfg = load_model_config(model_path)
     device = device or model_cfg.device
     iteration = find_iteration(model_path, iteration)
-    scene = Scene.load(source_path or model_cfg.source_path, model_path, white_background=model_cfg.white_background,
-                       resolution=model_cfg.resolution, eval=model_cfg.eval, images=model_cfg.images, device=device)
+    scene = Scene.from_config(model_cfg, model_path, source_path, device)
     gaussians = GaussianModel.load_ply(model_path / "point_cloud" / f"iteration_{iteration}" / "point_cloud.ply",
                                        device=device)
     return TrainedModel(model_path, model_cfg, pipeline_cfg, iteration, scene, gaussians,

@@ -124,8 +124,12 @@ def chosen_cameras(runs, path: Path) -> Path | None:
     fig, axes = plt.subplots(1, len(chosen), figsize=(3.6 * len(chosen), 3.9), squeeze=False)
     cmap = plt.get_cmap("viridis")
     for ax, (setting, r) in zip(axes[0], sorted(chosen.items())):
-        ids = [c["id"] for c in r.cameras]
-        xy = dict(zip(ids, top_down(np.array([c["position"] for c in r.cameras], dtype=float))))
+        # cameras.json lists test cameras first (as 3DGS does): training view v is entry len(test) + v.
+        first = r.stages[0]
+        num_test = max(0, len(r.cameras) - len(first.get("train_views", [])) - first.get("candidates", 0))
+        train_cams = r.cameras[num_test:]
+        ids = list(range(len(train_cams)))
+        xy = dict(zip(ids, top_down(np.array([c["position"] for c in train_cams], dtype=float))))
 
         def scatter(views, **kw):
             pts = np.array([xy[v] for v in views if v in xy]).reshape(-1, 2)

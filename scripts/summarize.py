@@ -44,7 +44,7 @@ class Run:
     stages: list[dict] = field(default_factory=list)  # selection.json "stages"
     final: dict | None = None  # selection.json "final" (train_views, test_psnr after the last stage)
     results: dict | None = None  # the newest ours_N entry of results.json
-    cameras: list[dict] = field(default_factory=list)  # cameras.json (train cameras)
+    cameras: list[dict] = field(default_factory=list)  # cameras.json (test cameras, then train cameras)
     problem: str = ""  # why the run has no results yet ("" when complete)
 
     @property

@@ -4,8 +4,8 @@
 
 Writes `results.json` ({"ours_N": {"SSIM", "PSNR", "LPIPS", "LPIPS_variant"}}) and `per_view.json`
 ({"ours_N": {"SSIM": {"00000.png": ...}, "PSNR": {...}, "LPIPS": {...}}}) into each model directory and prints a
-table. LPIPS weights: --lpips_weights, else $LITEGS_LPIPS_WEIGHTS, else ../shared/weights/lpips_squeeze.pt, else
-torchvision's backbone if already in the torch hub cache; nothing is downloaded. Without weights LPIPS is null.
+table. LPIPS weights: --lpips_weights, else $LITEGS_LPIPS_WEIGHTS, else the repository's weights/lpips_squeeze.pt,
+else torchvision's backbone if already in the torch hub cache; nothing is downloaded. Without weights LPIPS is null.
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ def evaluate(model_dirs: list[str | os.PathLike], lpips_weights: str | os.PathLi
 
     Args:
         model_dirs: Paths searched recursively for `test/ours_N/renders/*.png`.
-        lpips_weights: Full LPIPS state dict; None: $LITEGS_LPIPS_WEIGHTS or ../shared/weights/lpips_squeeze.pt,
+        lpips_weights: Full LPIPS state dict; None: $LITEGS_LPIPS_WEIGHTS or the shipped weights/lpips_squeeze.pt,
             else the torch hub cache.
         lpips_net: LPIPS variant; None: the one the weights hold (squeeze for the hub cache).
         device: Where images and LPIPS go.
@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("-m", "--model_paths", nargs="+", required=True,
                         help="model directories or folders above them (searched recursively)")
     parser.add_argument("--lpips_weights", default=None,
-                        help="full LPIPS state dict (default: $LITEGS_LPIPS_WEIGHTS or ../shared/weights/lpips_squeeze.pt)")
+                        help="full LPIPS state dict (default: $LITEGS_LPIPS_WEIGHTS or the shipped weights/lpips_squeeze.pt)")
     parser.add_argument("--lpips_net", choices=VARIANTS, default=None,
                         help="LPIPS variant; must match the weights (default: the variant the weights hold)")
     parser.add_argument("--device", default="cpu", help="torch device for the metrics (default: cpu)")

@@ -101,7 +101,8 @@ def image_size(path: Path, where: str) -> tuple[int, int]:
         with Image.open(path) as im:
             return im.size
     except (OSError, SyntaxError, ValueError) as exc:
-        raise UserError(f"{where}: cannot read image {path} ({exc}); replace the file") from None
+        raise UserError(f"{where}: cannot read image {path} ({exc}); the file is truncated or corrupt, "
+                        "replace it") from None
 
 
 def read_rgba(path: Path, where: str) -> np.ndarray:

@@ -54,7 +54,7 @@ def setup_missing_key(tiny_scene, tmp):
 def setup_missing_image(tiny_scene, tmp):
     scene = copy_scene(tiny_scene, tmp / "s")
     (scene / "train" / "r_5.png").unlink()
-    return ["train.py", "-s", str(scene), "-m", str(tmp / "m")], "r_5.png is missing"
+    return ["train.py", "-s", str(scene), "-m", str(tmp / "m")], "train/r_5.png; first listed at transforms_train.json frame 5"
 
 
 def setup_mixed_sizes(tiny_scene, tmp):
@@ -132,6 +132,64 @@ def setup_script_missing_scene(tiny_scene, tmp):
     (tmp / "data" / "ship").mkdir(parents=True)
     return ["bash", "scripts/setup1.sh", "--data", str(tmp / "data"), "--scenes", "lego", "--out",
             str(tmp / "out")], "scenes in"
+
+
+def tiny_capture(tmp: Path, change=None) -> Path:
+    """A 27x48 phone capture (transforms.json with k1 k2 p1 p2, no aabb_scale so nothing is logged)."""
+    from scene.phone_capture import make_phone_capture
+    root = make_phone_capture(tmp / "cap", 27, 48, num_frames=6, missing=0)
+    data = json.loads((root / "transforms.json").read_text())
+    del data["aabb_scale"]
+    if change:
+        change(data)
+    (root / "transforms.json").write_text(json.dumps(data))
+    return root
+
+
+def setup_ns_no_intrinsics(tiny_scene, tmp):
+    root = tiny_capture(tmp, lambda d: [d.pop(k) for k in ("fl_x", "fl_y")])
+    return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "needs 'camera_angle_x' or 'fl_x'"
+
+
+def setup_ns_size_mismatch(tiny_scene, tmp):
+    root = tiny_capture(tmp, lambda d: d.update(w=30))
+    return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "frame_00001.jpg is 27x48 but the intrinsics are for 30x48"
+
+
+def setup_ns_unknown_camera_model(tiny_scene, tmp):
+    root = tiny_capture(tmp, lambda d: d.update(camera_model="FOV"))
+    return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "unknown camera_model 'FOV'"
+
+
+def setup_ns_bad_distortion(tiny_scene, tmp):
+    root = tiny_capture(tmp, lambda d: d.update(k1=-1.0))
+    return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "undistortion failed"
+
+
+def setup_ns_unreadable_points(tiny_scene, tmp):
+    root = tiny_capture(tmp)
+    (root / "sparse_pc.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n")
+    return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "cannot read points file"
+
+
+def setup_ns_truncated_jpeg(tiny_scene, tmp):
+    root = tiny_capture(tmp)
+    image = root / "images" / "frame_00003.jpg"
+    image.write_bytes(image.read_bytes()[:300])
+    return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "truncated or corrupt"
+
+
+def setup_ns_missing_images(tiny_scene, tmp):
+    root = tiny_capture(tmp)
+    (root / "images" / "frame_00002.jpg").unlink()
+    return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "1 of 6 listed images are missing"
+
+
+def setup_truncated_png(tiny_scene, tmp):
+    scene = copy_scene(tiny_scene, tmp / "s")
+    image = scene / "train" / "r_4.png"
+    image.write_bytes(image.read_bytes()[:-200])
+    return ["train.py", "-s", str(scene), "-m", str(tmp / "m")], "truncated or corrupt"
 
 
 CASES = {name[len("setup_"):]: fn for name, fn in globals().items() if name.startswith("setup_")}

@@ -1,4 +1,4 @@
-"""LPIPS loading (shared weights, hub cache, nothing) and metrics.py end to end on PNGs written here."""
+"""LPIPS loading (shipped weights, hub cache, nothing) and metrics.py end to end on PNGs written here."""
 from __future__ import annotations
 
 import json
@@ -15,17 +15,15 @@ import metrics
 from tests.conftest import run_cli
 from utils.errors import UserError
 from utils.losses import ssim
-from utils.lpips_loader import LPIPS_MIN_SIDE, VARIANTS, _build, infer_variant, load_lpips, lpips_distance
+from utils.lpips_loader import (LPIPS_MIN_SIDE, SHIPPED_WEIGHTS, VARIANTS, _build, default_weights_path, infer_variant,
+                                load_lpips, lpips_distance)
 
 
 @pytest.fixture(scope="module")
 def squeeze_weights() -> Path:
-    """../shared/weights/lpips_squeeze.pt; skips when it is absent."""
-    from tests.conftest import SHARED
-    path = SHARED / "weights" / "lpips_squeeze.pt"
-    if not path.is_file():
-        pytest.skip(f"LPIPS weights not found at {path} (set LITEGS_SHARED)")
-    return path
+    """The LPIPS-squeeze weights shipped in the repository (weights/lpips_squeeze.pt)."""
+    assert SHIPPED_WEIGHTS.is_file(), f"{SHIPPED_WEIGHTS} is missing from the repository"
+    return SHIPPED_WEIGHTS
 
 
 @pytest.fixture(autouse=True)
@@ -40,7 +38,7 @@ def _images(n: int, h: int, w: int, seed: int) -> torch.Tensor:
     return torch.rand(n, 3, h, w, generator=g)  # [n, 3, H, W]
 
 
-def test_lpips_loads_shared_weights_strictly(shared_dir, squeeze_weights):
+def test_lpips_loads_shipped_weights_strictly(squeeze_weights):
     loaded = load_lpips("squeeze", squeeze_weights)
     assert loaded is not None
     model, variant = loaded
@@ -58,10 +56,10 @@ def test_lpips_loads_shared_weights_strictly(shared_dir, squeeze_weights):
         load_lpips("alex", squeeze_weights)
 
 
-def test_lpips_from_hub_cache_equals_full_state_dict(shared_dir, squeeze_weights, tmp_path, caplog):
+def test_lpips_from_hub_cache_equals_full_state_dict(squeeze_weights, tmp_path, caplog):
     """A torchvision SqueezeNet file in the hub cache plus the package's linear layers = the full state dict."""
     state = torch.load(squeeze_weights, weights_only=True)
-    # The shared dict's backbone equals torchvision's squeezenet1_1 ImageNet weights; write it as torchvision names it.
+    # The shipped dict's backbone equals torchvision's squeezenet1_1 ImageNet weights; write it as torchvision names it.
     backbone = {k.replace("net.", "", 1).split(".", 1)[1]: v for k, v in state.items() if k.startswith("net.")}
     backbone = {f"features.{k}": v for k, v in backbone.items()}
     with caplog.at_level(logging.WARNING):
@@ -74,7 +72,7 @@ def test_lpips_from_hub_cache_equals_full_state_dict(shared_dir, squeeze_weights
     full_model, _ = load_lpips("squeeze", squeeze_weights)
     a, b = _images(1, 24, 24, 2), _images(1, 24, 24, 3)
     assert variant == "squeeze"
-    # Same weights, same network: equal up to float32 rounding (the package's lin layers equal the shared ones).
+    # Same weights, same network: equal up to float32 rounding (the package's lin layers equal the shipped ones).
     torch.testing.assert_close(lpips_distance(hub_model, variant, a, b), lpips_distance(full_model, variant, a, b),
                                rtol=1e-6, atol=1e-7)
 
@@ -127,7 +125,7 @@ def _model_dir(root: Path, methods: dict[str, int], size=(24, 20), seed=0) -> di
     return stored
 
 
-def test_metrics_end_to_end(shared_dir, squeeze_weights, tmp_path, capsys):
+def test_metrics_end_to_end(squeeze_weights, tmp_path, capsys):
     model = tmp_path / "runs" / "scene_a"
     stored = _model_dir(model, {"ours_30": 2, "ours_7": 3})
     (tmp_path / "runs" / "empty" / "test").mkdir(parents=True)  # a run without renders is skipped
@@ -174,7 +172,18 @@ def test_metrics_without_lpips_weights(tmp_path, caplog):
     assert "unavailable" in metrics.format_table(summary)
 
 
-def test_lpips_null_for_images_below_min_side(shared_dir, squeeze_weights, tmp_path, caplog):
+def test_fresh_clone_uses_shipped_weights_by_default(tmp_path, monkeypatch):
+    # No ../shared, no hub cache (the autouse fixture empties it), no environment variable: the shipped file.
+    import tests.conftest
+    monkeypatch.setattr(tests.conftest, "SHARED", tmp_path / "no_shared")
+    assert default_weights_path() == SHIPPED_WEIGHTS
+    _model_dir(tmp_path, {"ours_5": 2})
+    summary = metrics.evaluate([tmp_path], quiet=True)
+    result = summary[str(tmp_path)]["ours_5"]
+    assert result["LPIPS_variant"] == "squeeze" and result["LPIPS"] > 0
+
+
+def test_lpips_null_for_images_below_min_side(squeeze_weights, tmp_path, caplog):
     _model_dir(tmp_path, {"ours_5": 1}, size=(12, 30))
     with caplog.at_level(logging.WARNING):
         metrics.evaluate([tmp_path], lpips_weights=squeeze_weights, quiet=True)

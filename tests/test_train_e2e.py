@@ -15,7 +15,12 @@ def test_train_render_metrics(tiny_scene, tmp_path):
     for rel in ("cfg_args", "cameras.json", "input.ply", "point_cloud/iteration_40/point_cloud.ply"):
         assert (model / rel).is_file(), rel
     assert json.loads((model / "run_status.json").read_text())["status"] == "complete"
-    assert len(json.loads((model / "cameras.json").read_text())) == 14
+    cameras = json.loads((model / "cameras.json").read_text())
+    assert [c["id"] for c in cameras] == list(range(4 + 14))  # 3DGS order: the 4 test cameras, then 14 training
+    assert [c["img_name"] for c in cameras[:5]] == ["r_0", "r_1", "r_2", "r_3", "r_0"]
+    cfg = json.loads((model / "cfg_args").read_text())
+    assert cfg["dataset"] == {"kind": "blender", "num_train": 14, "num_test": 4, "dropped_images": []}
+    assert cfg["model"]["skip_missing_images"] is False
     r = run_cli("render.py", "-m", str(model), "--quiet")
     assert r.returncode == 0, r.stderr
     assert len(list((model / "test" / "ours_40" / "renders").glob("*.png"))) == 4

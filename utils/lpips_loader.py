@@ -1,8 +1,8 @@
 """LPIPS without downloads: the `lpips` package with weights already on disk, or nothing (never a made-up number).
 
 Two sources, neither touching the network:
-- a full LPIPS state dict (backbone + linear layers), e.g. ../shared/weights/lpips_squeeze.pt, loaded strictly;
-  its variant (alex / vgg / squeeze) is read from the keys;
+- a full LPIPS state dict (backbone + linear layers), by default the repository's weights/lpips_squeeze.pt
+  (see weights/LICENSES.md), loaded strictly; its variant (alex / vgg / squeeze) is read from the keys;
 - without one, torchvision's ImageNet backbone file if it is already in the torch hub cache
   (`<torch.hub.get_dir()>/checkpoints/`), plus the linear layers shipped inside the `lpips` package.
 The network is always built with `pnet_rand=True` (random backbone, so torchvision downloads nothing) and the real
@@ -23,7 +23,7 @@ from utils.errors import UserError
 log = logging.getLogger(__name__)
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-SHARED_WEIGHTS = REPO_ROOT.parent / "shared" / "weights" / "lpips_squeeze.pt"
+SHIPPED_WEIGHTS = REPO_ROOT / "weights" / "lpips_squeeze.pt"
 WEIGHTS_ENV = "LITEGS_LPIPS_WEIGHTS"
 VARIANTS = ("alex", "vgg", "squeeze")
 # Smallest image side each backbone accepts (measured with lpips 0.1.4: one pixel less makes a pooling layer's
@@ -32,12 +32,12 @@ LPIPS_MIN_SIDE = {"squeeze": 17, "alex": 31, "vgg": 16}
 
 
 def default_weights_path() -> Path | None:
-    """$LITEGS_LPIPS_WEIGHTS when set (even if missing, so the caller reports it), else the shared
-    ../shared/weights/lpips_squeeze.pt beside the repository if it exists, else None."""
+    """$LITEGS_LPIPS_WEIGHTS when set (even if missing, so the caller reports it), else the repository's
+    weights/lpips_squeeze.pt if it exists, else None (then the torch hub cache is tried)."""
     env = os.environ.get(WEIGHTS_ENV)
     if env:
         return Path(env)
-    return SHARED_WEIGHTS if SHARED_WEIGHTS.is_file() else None
+    return SHIPPED_WEIGHTS if SHIPPED_WEIGHTS.is_file() else None
 
 
 def infer_variant(state: dict) -> str | None:

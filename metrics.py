@@ -36,7 +36,7 @@ def evaluate(model_dirs: list[str | os.PathLike], lpips_weights: str | os.PathLi
         UserError: nothing rendered under the paths, renders/gt mismatches, LPIPS variant mismatch.
     """
     found = find_model_dirs(list(model_dirs))
-    weights = lpips_weights if lpips_weights is not None else default_weights_path()
+    weights = lpips_weights if lpips_weights is not None else default_weights_path(lpips_net)
     loaded = load_lpips(lpips_net, weights, device)
     lpips = Lpips(*loaded) if loaded is not None else None
     summary: dict[str, dict] = {}

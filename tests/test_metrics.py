@@ -172,15 +172,20 @@ def test_metrics_without_lpips_weights(tmp_path, caplog):
     assert "unavailable" in metrics.format_table(summary)
 
 
-def test_fresh_clone_uses_shipped_weights_by_default(tmp_path, monkeypatch):
+def test_fresh_clone_uses_shipped_weights_by_default(tmp_path, monkeypatch, caplog):
     # No ../shared, no hub cache (the autouse fixture empties it), no environment variable: the shipped file.
     import tests.conftest
     monkeypatch.setattr(tests.conftest, "SHARED", tmp_path / "no_shared")
-    assert default_weights_path() == SHIPPED_WEIGHTS
+    assert default_weights_path() == default_weights_path("squeeze") == SHIPPED_WEIGHTS
+    assert default_weights_path("alex") is None  # AlexNet comes from the torch hub cache
     _model_dir(tmp_path, {"ours_5": 2})
     summary = metrics.evaluate([tmp_path], quiet=True)
     result = summary[str(tmp_path)]["ours_5"]
     assert result["LPIPS_variant"] == "squeeze" and result["LPIPS"] > 0
+    # --lpips_net alex still looks in the (here empty) torch hub cache instead of refusing the shipped squeeze file.
+    with caplog.at_level(logging.WARNING):
+        summary = metrics.evaluate([tmp_path], lpips_net="alex", quiet=True)
+    assert summary[str(tmp_path)]["ours_5"]["LPIPS"] is None and "alex backbone" in caplog.text
 
 
 def test_lpips_null_for_images_below_min_side(squeeze_weights, tmp_path, caplog):

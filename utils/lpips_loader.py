@@ -31,13 +31,14 @@ VARIANTS = ("alex", "vgg", "squeeze")
 LPIPS_MIN_SIDE = {"squeeze": 17, "alex": 31, "vgg": 16}
 
 
-def default_weights_path() -> Path | None:
+def default_weights_path(net: str | None = None) -> Path | None:
     """$LITEGS_LPIPS_WEIGHTS when set (even if missing, so the caller reports it), else the repository's
-    weights/lpips_squeeze.pt if it exists, else None (then the torch hub cache is tried)."""
+    weights/lpips_squeeze.pt if it exists and `net` is None or "squeeze", else None (then the torch hub cache is
+    tried for `net`, e.g. AlexNet)."""
     env = os.environ.get(WEIGHTS_ENV)
     if env:
         return Path(env)
-    return SHIPPED_WEIGHTS if SHIPPED_WEIGHTS.is_file() else None
+    return SHIPPED_WEIGHTS if SHIPPED_WEIGHTS.is_file() and net in (None, "squeeze") else None
 
 
 def infer_variant(state: dict) -> str | None:

@@ -161,7 +161,7 @@ class UndistortCache:
     """Undistorted, resized RGBA images, kept as PNGs under `<dataset>/.undistorted/<key>/`.
 
     The key hashes the lens (model, size, intrinsics, coefficients) and the output size, so a change of either
-    makes a new entry. When the dataset directory is not writable the cache moves to
+    makes a new entry; each image's entry also carries its byte size and modification time. When the dataset directory is not writable the cache moves to
     `~/.cache/litegs/undistorted/<hash of the dataset path>/` (one log line says so). Files are written to a
     temporary name and renamed, so an interrupted run never leaves a partial image under a final name.
     """
@@ -169,6 +169,7 @@ class UndistortCache:
     def __init__(self, root: Path):
         self.root = root
         self._dir: Path | None = None
+        self._write_failed = False
 
     def _base(self) -> Path:
         if self._dir is None:
@@ -187,8 +188,12 @@ class UndistortCache:
         return self._dir
 
     def path(self, lens: Lens, size: tuple[int, int], image: Path) -> Path:
+        """The entry of `image`: its name, byte size and modification time are in the file name, so an image
+        replaced in place gets a new entry."""
         rel = os.path.relpath(image, self.root).replace(os.sep, "__")
-        return self._base() / f"v{CACHE_VERSION}_{lens.key()}_{size[0]}x{size[1]}" / f"{rel}.png"
+        stat = image.stat()
+        return (self._base() / f"v{CACHE_VERSION}_{lens.key()}_{size[0]}x{size[1]}"
+                / f"{rel}.{stat.st_size}-{stat.st_mtime_ns}.png")
 
     def get(self, path: Path) -> np.ndarray | None:
         if not path.is_file():
@@ -200,10 +205,18 @@ class UndistortCache:
             return None  # a damaged cache entry is rebuilt
 
     def put(self, path: Path, rgba: np.ndarray) -> None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        Image.fromarray(rgba, "RGBA").save(tmp, format="PNG")
-        os.replace(tmp, path)
+        """Store an entry (a unique temporary name, then a rename: safe with concurrent runs); a failed write only
+        costs the cache, with one log line."""
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+            with os.fdopen(fd, "wb") as fh:
+                Image.fromarray(rgba, "RGBA").save(fh, format="PNG")
+            os.replace(tmp, path)
+        except OSError as exc:
+            if not self._write_failed:
+                log.warning("cannot write the undistortion cache in %s (%s); going on without it", path.parent, exc)
+            self._write_failed = True
 
 
 @dataclass
@@ -214,8 +227,8 @@ class CameraLoader:
     resolution: int
     background: torch.Tensor  # [3]
     ignore_distortion: bool = False
-    _undistorters: dict = field(default_factory=dict)
-    _cache: UndistortCache | None = None
+    _undistorters: dict[str, Undistorter] = field(default_factory=dict, init=False, repr=False)  # by lens key
+    _cache: UndistortCache | None = field(default=None, init=False, repr=False)
 
     def camera(self, uid: int, frame: Frame, lens: Lens, size: tuple[int, int]) -> Camera:
         """The camera of `frame` whose image file is `size` = (w, h) and whose lens is in the file's pixels."""

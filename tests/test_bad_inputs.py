@@ -153,7 +153,8 @@ def setup_ns_no_intrinsics(tiny_scene, tmp):
 
 def setup_ns_size_mismatch(tiny_scene, tmp):
     root = tiny_capture(tmp, lambda d: d.update(w=30))
-    return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "frame_00001.jpg is 27x48 but the intrinsics are for 30x48"
+    return (["train.py", "-s", str(root), "-m", str(tmp / "m")],
+            "frame_00001.jpg is 27x48 but the intrinsics are for 30x48")
 
 
 def setup_ns_unknown_camera_model(tiny_scene, tmp):

@@ -21,7 +21,8 @@ def read_ply_independently(path) -> dict[str, np.ndarray]:
     rest = col(*[f"f_rest_{i}" for i in range(9)]).reshape(-1, 3, 3).transpose(0, 2, 1)  # [N, 3 bases, 3 ch]
     quats = col("rot_0", "rot_1", "rot_2", "rot_3")
     return {"means": col("x", "y", "z"), "dc": col("f_dc_0", "f_dc_1", "f_dc_2"), "rest": rest,
-            "opacities": 1 / (1 + np.exp(-col("opacity")[:, 0])), "scales": np.exp(col("scale_0", "scale_1", "scale_2")),
+            "opacities": 1 / (1 + np.exp(-col("opacity")[:, 0])),
+            "scales": np.exp(col("scale_0", "scale_1", "scale_2")),
             "quats": quats / np.linalg.norm(quats, axis=1, keepdims=True)}
 
 

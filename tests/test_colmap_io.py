@@ -1,7 +1,6 @@
 """COLMAP reader: binary and text round trips through a small writer, camera models, the COLMAP loader."""
 from __future__ import annotations
 
-import logging
 import math
 import struct
 from pathlib import Path

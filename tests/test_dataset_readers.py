@@ -148,7 +148,8 @@ def test_missing_and_empty_paths(tmp_path):
 
 def test_neither_layout(tmp_path):
     (tmp_path / "notes.txt").write_text("x")
-    with pytest.raises(UserError, match=r"transforms_train\.json.*sparse/0"):
+    with pytest.raises(UserError, match=r"neither a Blender dataset \(transforms_train\.json\), a nerfstudio / "
+                                        r"instant-ngp one \(transforms\.json\) nor a COLMAP one \(sparse/0"):
         load_scene_info(str(tmp_path))
 
 

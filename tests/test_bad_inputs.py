@@ -135,7 +135,9 @@ def setup_script_missing_scene(tiny_scene, tmp):
 
 
 def tiny_capture(tmp: Path, change=None) -> Path:
-    """A 27x48 phone capture (transforms.json with k1 k2 p1 p2, no aabb_scale so nothing is logged)."""
+    """A 27x48 phone capture (transforms.json with k1 k2 p1 p2, no aabb_scale so nothing is logged).
+    The other transforms.json errors (no intrinsics, unknown camera_model, unreadable points) are checked at the
+    loader in tests/test_transforms_json.py."""
     from scene.phone_capture import make_phone_capture
     root = make_phone_capture(tmp / "cap", 27, 48, num_frames=6, missing=0)
     data = json.loads((root / "transforms.json").read_text())
@@ -146,31 +148,15 @@ def tiny_capture(tmp: Path, change=None) -> Path:
     return root
 
 
-def setup_ns_no_intrinsics(tiny_scene, tmp):
-    root = tiny_capture(tmp, lambda d: [d.pop(k) for k in ("fl_x", "fl_y")])
-    return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "needs 'camera_angle_x' or 'fl_x'"
-
-
 def setup_ns_size_mismatch(tiny_scene, tmp):
     root = tiny_capture(tmp, lambda d: d.update(w=30))
     return (["train.py", "-s", str(root), "-m", str(tmp / "m")],
             "frame_00001.jpg is 27x48 but the intrinsics are for 30x48")
 
 
-def setup_ns_unknown_camera_model(tiny_scene, tmp):
-    root = tiny_capture(tmp, lambda d: d.update(camera_model="FOV"))
-    return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "unknown camera_model 'FOV'"
-
-
 def setup_ns_bad_distortion(tiny_scene, tmp):
     root = tiny_capture(tmp, lambda d: d.update(k1=-1.0))
     return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "undistortion failed"
-
-
-def setup_ns_unreadable_points(tiny_scene, tmp):
-    root = tiny_capture(tmp)
-    (root / "sparse_pc.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n")
-    return ["train.py", "-s", str(root), "-m", str(tmp / "m")], "cannot read points file"
 
 
 def setup_ns_truncated_jpeg(tiny_scene, tmp):

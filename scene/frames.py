@@ -161,9 +161,10 @@ class UndistortCache:
     """Undistorted, resized RGBA images, kept as PNGs under `<dataset>/.undistorted/<key>/`.
 
     The key hashes the lens (model, size, intrinsics, coefficients) and the output size, so a change of either
-    makes a new entry; each image's entry also carries its byte size and modification time. When the dataset directory is not writable the cache moves to
-    `~/.cache/litegs/undistorted/<hash of the dataset path>/` (one log line says so). Files are written to a
-    temporary name and renamed, so an interrupted run never leaves a partial image under a final name.
+    makes a new entry; each image's entry also carries its byte size and modification time. When the dataset
+    directory is not writable the cache moves to `~/.cache/litegs/undistorted/<hash of the dataset path>/` (one
+    log line says so). Files are written to a temporary name and renamed, so an interrupted run never leaves a
+    partial image under a final name.
     """
 
     def __init__(self, root: Path):

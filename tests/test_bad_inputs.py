@@ -54,7 +54,8 @@ def setup_missing_key(tiny_scene, tmp):
 def setup_missing_image(tiny_scene, tmp):
     scene = copy_scene(tiny_scene, tmp / "s")
     (scene / "train" / "r_5.png").unlink()
-    return ["train.py", "-s", str(scene), "-m", str(tmp / "m")], "train/r_5.png; first listed at transforms_train.json frame 5"
+    return (["train.py", "-s", str(scene), "-m", str(tmp / "m")],
+            "train/r_5.png; first listed at transforms_train.json frame 5")
 
 
 def setup_mixed_sizes(tiny_scene, tmp):

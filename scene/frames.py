@@ -21,6 +21,7 @@ from utils.errors import UserError
 log = logging.getLogger(__name__)
 
 MISSING_SHOWN = 3  # file names quoted in the missing-images error
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")  # image files the loaders accept
 CACHE_DIR_NAME = ".undistorted"  # beside the dataset's images
 CACHE_VERSION = 1
 # Stored size / calibrated size factors accepted as "the same images, stored smaller or larger" (images_2, ...).

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from PIL import Image
 
-from scene.dataset_readers import IMAGE_SUFFIXES, target_size
+from scene.frames import IMAGE_SUFFIXES, target_size
 from utils.errors import UserError
 
 CUDA_MAX_WIDTH = 1600  # the 3DGS rule: wider images are scaled to this width

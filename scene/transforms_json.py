@@ -15,7 +15,7 @@ from pathlib import Path
 
 import torch
 
-from scene.frames import (GL_TO_CV, CameraLoader, Frame, PointCloud, SceneInfo, drop_missing, image_size,
+from scene.frames import (GL_TO_CV, IMAGE_SUFFIXES, CameraLoader, Frame, PointCloud, SceneInfo, drop_missing, image_size,
                           scene_extent, stored_scale)
 from scene.lens import LENS_MODELS, Lens
 from scene.ply_io import load_points_ply
@@ -23,7 +23,6 @@ from utils.errors import UserError
 
 log = logging.getLogger(__name__)
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
 
 

@@ -76,7 +76,7 @@ def suggest_resolution(seconds: float, size: tuple[int, int], full_size: tuple[i
     Tries the downscale factors first, then a target width from the square-root rule; None when even a
     16 px wide image would not do (the run is long for another reason: shorten it).
     """
-    from scene.dataset_readers import target_size
+    from scene.frames import target_size
     from scene.resolution_policy import MIN_IMAGE_SIDE
 
     pixels = size[0] * size[1]

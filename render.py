@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import torch
@@ -34,14 +35,16 @@ def render_set(out_dir: Path, cameras: list[Camera], gaussians: GaussianModel, b
 
 
 def render_model(model_path: str | Path, iteration: int = -1, skip_train: bool = False, skip_test: bool = False,
-                 source_path: str | None = None, quiet: bool = False) -> int:
-    """Render one model directory; returns the iteration rendered."""
+                 source_path: str | None = None, quiet: bool = False, raster_backend: str | None = None) -> int:
+    """Render one model directory (rasterizer backend: `raster_backend`, else the run's); returns the iteration
+    rendered."""
     trained = load_trained(model_path, iteration, source_path)
+    settings = replace(trained.settings, backend=raster_backend) if raster_backend else trained.settings
     for split, cameras, skip in (("train", trained.scene.train_cameras, skip_train),
                                  ("test", trained.scene.test_cameras, skip_test)):
         if not skip and cameras:
             render_set(trained.path / split / f"ours_{trained.iteration}", cameras, trained.gaussians,
-                       trained.background, trained.settings, quiet)
+                       trained.background, settings, quiet)
     return trained.iteration
 
 
@@ -53,8 +56,11 @@ def main() -> None:
     parser.add_argument("--skip_train", action="store_true", help="do not render the training views")
     parser.add_argument("--skip_test", action="store_true", help="do not render the test views")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--raster_backend", choices=("auto", "compiled", "torch"), default=None,
+                        help="rasterizer backend (default: the one the model was trained with, in cfg_args)")
     args = parser.parse_args()
-    it = render_model(args.model_path, args.iteration, args.skip_train, args.skip_test, args.source_path, args.quiet)
+    it = render_model(args.model_path, args.iteration, args.skip_train, args.skip_test, args.source_path, args.quiet,
+                      args.raster_backend)
     print(f"{args.model_path}: rendered iteration {it}")
 
 

@@ -47,6 +47,9 @@ class PipelineConfig:
     """Rasterizer settings."""
 
     tile_size: int = field(default=4, metadata=_flag(None, "rasterizer tile size in pixels"))
+    raster_backend: str = field(default="auto", metadata=_flag(
+        None, "rasterizer: compiled numba CPU kernels, pure torch, or auto (compiled when numba imports; CUDA: torch)",
+        ("auto", "compiled", "torch")))
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,9 @@
 """Rasterizer speed: the tiled fast path vs the dense autograd reference, and `attribute_gram` vs a training step.
 
     python benchmarks/bench_rasterize.py [--presets 2k@128 10k@256 garden] [--repeats 5] [--threads 2]
+        [--backends torch,compiled] [--json PATH]
     python benchmarks/bench_rasterize.py --resolution_scaling [--model output/lego] [--widths 200 400 800]
+        [--backends compiled]
 
 Inputs are already-projected 2D Gaussians (what `rasterize` consumes). Synthetic presets `<N>@<size>` draw N
 anisotropic Gaussians uniformly over a size x size image (sigma log-uniform in [0.5, 5] px at 128 px, scaled
@@ -11,7 +13,9 @@ opacity 0.1) into its first camera at 1/4 resolution.
 
 Timed (warm-up, then the median of R runs): fast forward (no grad), fast forward+backward (one training step
 of the rasterizer), the dense reference forward+backward (only where N x H x W <= --ref_max_pairs), and
-`attribute_gram` (one view's Fisher-ready Gram matrices). Prints a table and writes JSON to benchmarks/results/.
+`attribute_gram` (one view's Fisher-ready Gram matrices). Prints a table and writes JSON to benchmarks/results/
+(or --json PATH): one row per (preset, backend) with fwd_ms, fwd_bwd_ms, gram_ms. With several --backends each
+runs in its own process (numba's and torch's thread pools never share one) and a torch/compiled ratio table follows.
 
 `--resolution_scaling` times instead one whole training step (render forward + L1/SSIM loss + backward) of a
 fixed set of 3D Gaussians from one view of a Blender scene (`--source`, default ../shared/data/lego) at each of
@@ -26,7 +30,9 @@ import json
 import math
 import platform
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Callable
@@ -97,7 +103,7 @@ def garden_inputs(max_points: int) -> Inputs:
 
 
 def bench(name: str, inputs: Inputs, settings: RasterSettings, repeats: int, ref_max_pairs: float) -> dict:
-    """Time the four operations on one input set; returns one JSON row (seconds)."""
+    """Time the four operations on one input set with `settings.backend`; returns one JSON row (s and ms)."""
     means2d, conics, opacities, colors, depths, radii, width, height, bg = inputs
     leaves = [t.clone().requires_grad_(True) for t in (means2d, conics, opacities, colors, bg)]
 
@@ -117,8 +123,9 @@ def bench(name: str, inputs: Inputs, settings: RasterSettings, repeats: int, ref
            "height": height, "tile_size": settings.tile_size, "chunk_size": settings.chunk_size,
            "pairs_per_tile_max": bins.lists.shape[1], "pairs": int((bins.lists >= 0).sum()),
            "forward_s": median_time(forward, repeats), "train_step_s": median_time(train_step, repeats),
-           "gram_s": median_time(gram, repeats)}
-    if row["visible"] * width * height <= ref_max_pairs:
+           "gram_s": median_time(gram, repeats), "backend": settings.backend}
+    row.update(fwd_ms=1e3 * row["forward_s"], fwd_bwd_ms=1e3 * row["train_step_s"], gram_ms=1e3 * row["gram_s"])
+    if settings.backend == "torch" and row["visible"] * width * height <= ref_max_pairs:
         row["reference_step_s"] = median_time(lambda: train_step(rasterize_reference), max(1, repeats // 2))
     return row
 
@@ -203,10 +210,19 @@ def main() -> None:
     parser.add_argument("--widths", type=int, nargs="+", default=[200, 400, 800])
     parser.add_argument("--view", type=int, default=0, help="training view used by --resolution_scaling")
     parser.add_argument("--num_random_points", type=int, default=10_000, help="fresh model's points (train.py's)")
+    parser.add_argument("--backends", default="torch",
+                        help="comma-separated rasterizer backends to time: torch, compiled, auto")
+    parser.add_argument("--json", default=None, help="write the JSON here (default benchmarks/results/rasterize_<time>.json)")
     args = parser.parse_args()
+    backends = args.backends.split(",")
+    if args.resolution_scaling and len(backends) > 1:
+        parser.error("--resolution_scaling times one backend at a time: pass --backends torch or --backends compiled")
+    if len(backends) > 1:
+        run_backends_apart(args, backends)
+        return
     if args.threads:
         torch.set_num_threads(args.threads)
-    settings = RasterSettings(tile_size=args.tile_size, chunk_size=args.chunk_size)
+    settings = RasterSettings(tile_size=args.tile_size, chunk_size=args.chunk_size, backend=backends[0])
     if args.resolution_scaling:
         write_results("scaling", args, resolution_scaling(args, settings))
         return
@@ -226,7 +242,7 @@ def main() -> None:
         ref_cols = f"{1e3 * ref:10.0f} {ref / r['train_step_s']:7.0f}x" if ref else f"{'n/a':>10} {'n/a':>8}"
         if len(rows) == 1:
             print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, {platform.machine()}, "
-                  f"tile {settings.tile_size}, chunk {settings.chunk_size}")
+                  f"tile {settings.tile_size}, chunk {settings.chunk_size}, backend {settings.backend}")
             print(f"{'preset':9} {'visible':>7} {'HxW':>9} {'pairs':>9} {'fwd ms':>8} {'fwd+bwd ms':>10} "
                   f"{'gram ms':>8} {'gram/step':>9} {'ref f+b ms':>10} {'speed-up':>8}")
         print(f"{r['preset']:9} {r['visible']:7d} {r['height']:4d}x{r['width']:<4d} {r['pairs']:9d} "
@@ -236,14 +252,39 @@ def main() -> None:
 
 
 def write_results(kind: str, args: argparse.Namespace, rows: list[dict]) -> None:
-    """benchmarks/results/<kind>_<time>.json with the machine, torch, threads, arguments and rows."""
-    out = Path(__file__).parent / "results" / f"{kind}_{time.strftime('%Y%m%d_%H%M%S')}.json"
-    out.parent.mkdir(exist_ok=True)
+    """Write the rows (and the machine and arguments) to --json or benchmarks/results/<kind>_<time>.json."""
+    out = Path(args.json) if args.json else \
+        Path(__file__).parent / "results" / f"{kind}_{time.strftime('%Y%m%d_%H%M%S')}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"machine": platform.platform(), "processor": platform.machine(),
-                               "torch": torch.__version__, "threads": torch.get_num_threads(),
+                               "torch": torch.__version__, "threads": args.threads or torch.get_num_threads(),
                                "args": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
                                "rows": rows}, indent=2))
     print(f"wrote {out}")
+
+
+def run_backends_apart(args: argparse.Namespace, backends: list[str]) -> None:
+    """Run each backend in its own process, then print the torch / other ratios and write all rows."""
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for backend in backends:
+            part = Path(tmp) / f"{backend}.json"
+            cmd = [sys.executable, __file__, "--backends", backend, "--json", str(part), "--presets", *args.presets,
+                   "--repeats", str(args.repeats), "--tile_size", str(args.tile_size), "--chunk_size",
+                   str(args.chunk_size), "--garden_points", str(args.garden_points), "--ref_max_pairs",
+                   str(args.ref_max_pairs)] + (["--threads", str(args.threads)] if args.threads else [])
+            subprocess.run(cmd, check=True)
+            rows += json.loads(part.read_text())["rows"]
+    base = {r["preset"]: r for r in rows if r["backend"] == backends[0]}
+    print(f"\nspeed-up of each backend over {backends[0]} (time {backends[0]} / time backend)")
+    print(f"{'preset':9} {'backend':9} {'fwd ms':>8} {'fwd+bwd ms':>10} {'gram ms':>8} {'fwd x':>7} {'f+b x':>7} "
+          f"{'gram x':>7}")
+    for r in rows:
+        b = base[r["preset"]]
+        print(f"{r['preset']:9} {r['backend']:9} {r['fwd_ms']:8.1f} {r['fwd_bwd_ms']:10.1f} {r['gram_ms']:8.1f} "
+              f"{b['fwd_ms'] / r['fwd_ms']:7.1f} {b['fwd_bwd_ms'] / r['fwd_bwd_ms']:7.1f} "
+              f"{b['gram_ms'] / r['gram_ms']:7.1f}")
+    write_results("rasterize", args, rows)
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ the peak resident memory of each: cached grows with M, streaming stays flat.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 import json
 import platform
 import resource
@@ -69,6 +70,8 @@ def main() -> None:
     parser.add_argument("--pool_sizes", type=int, nargs="+", default=[24, 48, 0], help="0 = all candidates")
     parser.add_argument("--json", type=Path, default=None, help="where to write the results (default: results/)")
     parser.add_argument("--report", type=Path, default=None, help="only print the table of a results JSON")
+    parser.add_argument("--raster_backend", choices=("auto", "compiled", "torch"), default=None,
+                        help="rasterizer backend (default: the model's cfg_args)")
     args = parser.parse_args()
     if args.report:
         report(args.report)
@@ -80,6 +83,8 @@ def main() -> None:
     model_path = Path(args.model)
     trained = load_trained(model_path, device="cpu")
     gaussians, cams, bg, settings = trained.gaussians, trained.scene.train_cameras, trained.background, trained.settings
+    if args.raster_backend:
+        settings = replace(settings, backend=args.raster_backend)
     seeds = farthest_point_views(torch.stack([c.camera_center for c in cams]), args.num_init_views)
     candidates = [v for v in range(len(cams)) if v not in seeds]
     if args.num_candidates > 0:

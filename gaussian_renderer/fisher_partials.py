@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import torch
 
+from gaussian_renderer.compiled import use_compiled
 from gaussian_renderer.projection import camera_center, project_gaussians
 from gaussian_renderer.rasterize import (NUM_GEOMETRY_ATTRIBUTES, _alpha_partials, _check_inputs,
                                          _color_alpha_partials, _composite, _from_image, _iterate_chunks,
@@ -42,6 +43,10 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
     settings = settings or RasterSettings()
     _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
     assert weights is None or weights.shape == (height, width), f"weights must be [H,W], got {tuple(weights.shape)}"
+    if use_compiled(settings.backend, means2d):
+        from gaussian_renderer.compiled.ops import attribute_gram_compiled
+        return attribute_gram_compiled(means2d, conics, opacities, colors, depths, radii, width, height, background,
+                                       settings, weights)
     n, d = colors.shape
     geo = NUM_GEOMETRY_ATTRIBUTES
     bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)

@@ -18,6 +18,7 @@ from typing import Iterator
 
 import torch
 
+from gaussian_renderer.compiled import use_compiled
 from gaussian_renderer.settings import RasterSettings
 
 NUM_GEOMETRY_ATTRIBUTES = 6  # mean x, mean y, conic a, b, c, opacity
@@ -313,5 +314,9 @@ def rasterize(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tens
     """
     settings = settings or RasterSettings()
     _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
+    if use_compiled(settings.backend, means2d):
+        from gaussian_renderer.compiled.ops import rasterize_compiled
+        return rasterize_compiled(means2d, conics, opacities, colors, depths, radii, width, height, background,
+                                  settings)
     bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
     return _RasterizeFunction.apply(means2d, conics, opacities, colors, background, bins, width, height, settings)

@@ -15,6 +15,7 @@ class RasterSettings:
     alpha_min: float = 1.0 / 255.0  # contributions with a smaller alpha are skipped
     alpha_max: float = 0.99  # alpha is clamped here (keeps 1 - alpha away from 0)
     transmittance_min: float = 1e-4  # a pixel stops once its transmittance would fall below this
+    backend: str = "auto"  # "torch", "compiled" (numba CPU kernels) or "auto" (compiled when numba imports)
 
     def __post_init__(self) -> None:
         if not (isinstance(self.tile_size, int) and self.tile_size >= 1):
@@ -26,3 +27,8 @@ class RasterSettings:
                             "use the defaults 1/255 and 0.99")
         if not 0 <= self.transmittance_min < 1:
             raise UserError(f"transmittance_min must be in [0, 1), got {self.transmittance_min}; use 1e-4")
+        from gaussian_renderer.compiled import BACKENDS, NUMBA_HINT, numba_import_error
+        if self.backend not in BACKENDS:
+            raise UserError(f"rasterizer backend must be one of {', '.join(BACKENDS)}, got {self.backend!r}")
+        if self.backend == "compiled" and numba_import_error() is not None:
+            raise UserError(NUMBA_HINT)

@@ -37,7 +37,7 @@ class TrainedModel:
 
 def raster_settings(pipeline: PipelineConfig) -> RasterSettings:
     """The rasterizer settings of a run's pipeline config (the one place the CLIs turn one into the other)."""
-    return RasterSettings(tile_size=pipeline.tile_size)
+    return RasterSettings(tile_size=pipeline.tile_size, backend=pipeline.raster_backend)
 
 
 def background_color(model_cfg: ModelConfig, device: str | torch.device | None = None) -> torch.Tensor:

@@ -1,0 +1,164 @@
+"""Torch-facing wrappers of the numba kernels: binning, the differentiable rasterizer and the attribute Gram.
+
+Same signatures and results as the torch path in `gaussian_renderer.rasterize` / `fisher_partials` (its twin
+in the tests); CPU tensors only (the dispatch in `gaussian_renderer.compiled` sends CUDA tensors to torch).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+import torch
+
+from gaussian_renderer.compiled import kernels
+from gaussian_renderer.rasterize import NUM_GEOMETRY_ATTRIBUTES, tile_ranges
+from gaussian_renderer.settings import RasterSettings
+from utils.errors import UserError
+
+_FLOAT_DTYPES = (torch.float32, torch.float64)
+
+
+@dataclass
+class CompiledBins:
+    """Per-tile depth-sorted Gaussian lists in CSR form."""
+
+    offsets: np.ndarray  # [T + 1] int64: tile t's list is ids[offsets[t]:offsets[t + 1]]
+    ids: np.ndarray  # [M] int32 Gaussian ids, front to back within each tile
+    tiles_x: int
+
+
+def _use_torch_threads() -> int:
+    """Run numba with the threads torch is given (capped by numba's pool size); returns the count."""
+    threads = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(threads)
+    return threads
+
+
+def prepare_inputs(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, colors: torch.Tensor,
+                   background: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    """Contiguous inputs in one float dtype (that of means2d; float32 or float64, else a UserError naming it).
+
+    The conversions are differentiable, so gradients still reach the caller's tensors.
+    """
+    if means2d.dtype not in _FLOAT_DTYPES:
+        raise UserError(f"the compiled rasterizer needs float32 or float64 inputs, got means2d [N,2] of dtype "
+                        f"{means2d.dtype}; convert with .float() or use --raster_backend torch")
+    if means2d.device.type != "cpu":
+        raise UserError(f"the compiled rasterizer runs on CPU tensors only, got {means2d.device}")
+    dtype = means2d.dtype
+    return tuple(t.to(dtype).contiguous() for t in (means2d, conics, opacities, colors, background))
+
+
+def _numpy(t: torch.Tensor) -> np.ndarray:
+    return t.detach().contiguous().numpy()
+
+
+def _float64(t: torch.Tensor) -> np.ndarray:
+    return _numpy(t.detach().double())
+
+
+def bin_gaussians_compiled(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
+                           radii: torch.Tensor, depths: torch.Tensor, width: int, height: int,
+                           settings: RasterSettings) -> CompiledBins:
+    """Tile lists by a parallel counting sort; within a tile, Gaussians keep their (stable) depth order."""
+    tile_size = settings.tile_size
+    tiles_x, tiles_y = -(-width // tile_size), -(-height // tile_size)
+    with torch.no_grad():
+        ids = torch.nonzero(radii > 0).squeeze(1)  # [n]
+        ids = ids[torch.argsort(depths.detach()[ids], stable=True)]  # depth order, ties by id (as the torch path)
+        x0, x1, y0, y1 = tile_ranges(means2d.detach()[ids], conics.detach()[ids], opacities.detach()[ids],
+                                     radii[ids], width, height, tile_size, settings.alpha_min)
+    threads = _use_torch_threads()
+    offsets, lists = kernels.bin_tiles(_numpy(x0), _numpy(x1), _numpy(y0), _numpy(y1), _numpy(ids),
+                                       tiles_x * tiles_y, tiles_x, threads)
+    return CompiledBins(offsets, lists, tiles_x)
+
+
+def _kernel_args(bins: CompiledBins, means2d, conics, opacities, colors, background, width: int, height: int,
+                 settings: RasterSettings) -> tuple:
+    """The arguments every kernel starts with: bins, packed float64 attributes (`kernels` module docstring),
+    colours, background, image and tile geometry, alpha cut-offs."""
+    with torch.no_grad():
+        o = opacities.detach().double()
+        cut = torch.log(settings.alpha_min / o.clamp_min(1e-300)) - 1e-9
+        geom = torch.cat([means2d.detach().double(), conics.detach().double(), o[:, None], cut[:, None],
+                          torch.zeros_like(o)[:, None]], dim=1)  # [N, 8]
+    return (bins.offsets, bins.ids, geom.numpy(), _float64(colors), _float64(background), width, height,
+            settings.tile_size, bins.tiles_x, float(settings.alpha_min), float(settings.alpha_max))
+
+
+def composite_compiled(bins: CompiledBins, means2d, conics, opacities, colors, background, width: int, height: int,
+                       settings: RasterSettings) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Forward pass: image [D, H, W] (input dtype), final transmittance [H, W] (float64), last [H, W] (int32)."""
+    image = np.zeros((colors.shape[1], height, width))
+    trans = np.ones((height, width))
+    last = np.zeros((height, width), np.int32)
+    _use_torch_threads()
+    kernels.forward(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height, settings),
+                    float(settings.transmittance_min), image, trans, last)
+    return torch.from_numpy(image).to(colors.dtype), torch.from_numpy(trans), torch.from_numpy(last)
+
+
+class _RasterizeCompiled(torch.autograd.Function):
+    """Forward and backward by the numba kernels; nothing per pair is stored."""
+
+    @staticmethod
+    def forward(ctx, means2d, conics, opacities, colors, background, bins, width, height, settings):
+        image, trans, last = composite_compiled(bins, means2d, conics, opacities, colors, background, width,
+                                                height, settings)
+        ctx.save_for_backward(means2d, conics, opacities, colors, background)
+        ctx.state = (bins, width, height, settings, trans, last)
+        return image, (1 - trans).to(means2d.dtype)
+
+    @staticmethod
+    def backward(ctx, grad_image, grad_alpha):
+        means2d, conics, opacities, colors, background = ctx.saved_tensors
+        bins, width, height, settings, trans, last = ctx.state
+        g_img, g_alpha = grad_image.double(), grad_alpha.double()  # [D, H, W], [H, W] (materialised by autograd)
+        out = kernels.backward(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height,
+                                             settings), trans.numpy(), last.numpy(), _float64(g_img), _float64(g_alpha),
+                               _use_torch_threads())
+        grad = torch.from_numpy(out).to(means2d.dtype)  # [N, 6 + D]
+        grad_bg = (g_img * trans).sum((1, 2)).to(background.dtype)
+        geo = NUM_GEOMETRY_ATTRIBUTES
+        return (grad[:, 0:2], grad[:, 2:5], grad[:, 5], grad[:, geo:], grad_bg, None, None, None, None)
+
+
+def rasterize_compiled(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, colors: torch.Tensor,
+                       depths: torch.Tensor, radii: torch.Tensor, width: int, height: int, background: torch.Tensor,
+                       settings: RasterSettings) -> tuple[torch.Tensor, torch.Tensor]:
+    """`gaussian_renderer.rasterize.rasterize` by the compiled kernels: image [D, H, W], alpha [H, W]."""
+    means2d, conics, opacities, colors, background = prepare_inputs(means2d, conics, opacities, colors, background)
+    bins = bin_gaussians_compiled(means2d, conics, opacities, radii, depths, width, height, settings)
+    return _RasterizeCompiled.apply(means2d, conics, opacities, colors, background, bins, width, height, settings)
+
+
+@torch.no_grad()
+def attribute_gram_compiled(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
+                            colors: torch.Tensor, depths: torch.Tensor, radii: torch.Tensor, width: int, height: int,
+                            background: torch.Tensor, settings: RasterSettings,
+                            weights: torch.Tensor | None = None) -> torch.Tensor:
+    """`gaussian_renderer.fisher_partials.attribute_gram` by the compiled kernels: float64 [N, A, A]."""
+    means2d, conics, opacities, colors, background = prepare_inputs(means2d, conics, opacities, colors, background)
+    n, d = colors.shape
+    bins = bin_gaussians_compiled(means2d, conics, opacities, radii, depths, width, height, settings)
+    _, trans, last = composite_compiled(bins, means2d, conics, opacities, colors, background, width, height, settings)
+    pixel_weights = np.ones((height, width)) if weights is None else _float64(weights)
+    sums = torch.from_numpy(kernels.gram(*_kernel_args(bins, means2d, conics, opacities, colors, background, width,
+                                                       height, settings), trans.numpy(), last.numpy(), pixel_weights,
+                                         _use_torch_threads()))
+    return assemble_gram(sums, n, d)
+
+
+def assemble_gram(sums: torch.Tensor, n: int, d: int) -> torch.Tensor:
+    """[N, A, A] Gram from the per-Gaussian sums [N, 6 (6 + D) + 1] (see `kernels.gram`), exactly symmetric."""
+    geo = NUM_GEOMETRY_ATTRIBUTES
+    prod = sums[:, :-1].reshape(n, geo, geo + d)
+    gram = torch.zeros(n, geo + d, geo + d, dtype=torch.float64, device=sums.device)
+    gram[:, :geo, :] = prod
+    upper = prod[:, :, :geo].triu()  # the kernel fills the upper triangle of the geometry block
+    gram[:, :geo, :geo] = upper + upper.transpose(1, 2) - torch.diag_embed(upper.diagonal(dim1=1, dim2=2))
+    gram[:, geo:, :geo] = prod[:, :, geo:].transpose(1, 2)
+    gram[:, geo:, geo:] = sums[:, -1, None, None] * torch.eye(d, dtype=torch.float64, device=sums.device)
+    return gram

@@ -1,0 +1,172 @@
+"""Compiled (numba) rasterizer backend vs its torch twin and the dense reference; backend selection and bad input."""
+import logging
+
+import pytest
+import torch
+
+from gaussian_renderer import RasterSettings, attribute_gram, rasterize
+from gaussian_renderer import compiled
+from gaussian_renderer.reference import rasterize_reference
+from tests.conftest import run_cli
+from tests.test_rasterize import BG, _grads, _run, random_2d_scene
+from utils.errors import UserError
+
+pytest.importorskip("numba")
+
+TOL = {torch.float64: 1e-9, torch.float32: 1e-5}  # relative to the largest entry of each compared tensor
+
+
+def stacked_scene(n=12, dtype=torch.float64):
+    """Opaque Gaussians on one spot: transmittance reaches the 1e-4 floor (early stop), centres clamp at 0.99."""
+    g = torch.Generator().manual_seed(7)
+    means2d = torch.full((n, 2), 4.0, dtype=dtype) + torch.rand(n, 2, generator=g, dtype=dtype)
+    conics = torch.tensor([[0.05, 0.01, 0.06]], dtype=dtype).repeat(n, 1)
+    opacities = torch.full((n,), 0.95, dtype=dtype)
+    opacities[0] = 1.0
+    return (means2d, conics, opacities, torch.rand(n, 3, generator=g, dtype=dtype), torch.arange(n, dtype=dtype),
+            torch.full((n,), 6, dtype=torch.long))
+
+
+def corner_scene(dtype=torch.float64):
+    """A few Gaussians in the top-left corner of a 40 x 36 image: most tiles are empty."""
+    means2d, conics, opacities, colors, depths, radii = random_2d_scene(10, 8, 8, seed=3, dtype=dtype)
+    return means2d.clamp(0, 8), conics, opacities, colors, depths, radii
+
+
+CASES = {  # name: (scene factory, width, height, tile size)
+    "mixed_tile4": (lambda dt: random_2d_scene(30, 24, 20, dtype=dt), 24, 20, 4),  # culled, off-screen, clamped
+    "mixed_tile16_overhang": (lambda dt: random_2d_scene(60, 40, 17, seed=1, dtype=dt), 40, 17, 16),
+    "many_tile8": (lambda dt: random_2d_scene(200, 33, 29, seed=2, dtype=dt), 33, 29, 8),
+    "early_stop_clamped": (lambda dt: stacked_scene(dtype=dt), 8, 8, 4),
+    "empty_tiles": (lambda dt: corner_scene(dtype=dt), 40, 36, 4),
+}
+
+
+def _render_all(backend, scene, width, height, tile, dtype):
+    settings = RasterSettings(tile_size=tile, chunk_size=3, backend=backend)
+    bg = BG.to(dtype)
+    leaves = [t.clone().requires_grad_(True) for t in (*scene[:4], bg)]
+    image, alpha = rasterize(*leaves[:4], scene[4], scene[5], width, height, leaves[4], settings)
+    grads = _grads(image, alpha, leaves)
+    weights = torch.rand(height, width, generator=torch.Generator().manual_seed(4), dtype=dtype)
+    gram = attribute_gram(*scene, width, height, bg, settings)
+    gram_weighted = attribute_gram(*scene, width, height, bg, settings, weights=weights)
+    return image, alpha, *grads, gram, gram_weighted
+
+
+def _assert_close_rel(actual, expected, tol, what):
+    scale = expected.abs().max().clamp_min(1e-30)
+    err = (actual.double() - expected.double()).abs().max() / scale
+    assert err <= tol, f"{what}: relative error {err:.2e} > {tol:.0e}"
+
+
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+@pytest.mark.parametrize("case", list(CASES))
+def test_compiled_matches_torch_twin(case, dtype):
+    make, width, height, tile = CASES[case]
+    scene = make(dtype)
+    names = ["image", "alpha", "d means2d", "d conics", "d opacities", "d colors", "d background", "gram",
+             "weighted gram"]
+    torch_out = _render_all("torch", scene, width, height, tile, dtype)
+    compiled_out = _render_all("compiled", scene, width, height, tile, dtype)
+    for name, a, b in zip(names, compiled_out, torch_out):
+        assert a.dtype == b.dtype and a.shape == b.shape, name
+        _assert_close_rel(a, b, TOL[dtype], f"{case} {dtype} {name}")
+
+
+def test_cases_exercise_every_rule():
+    # Guards the comparison above: early stop, clamping and empty tiles really happen.
+    image, alpha = rasterize(*stacked_scene(), 8, 8, BG, RasterSettings(tile_size=4, backend="compiled"))
+    assert 1 - 1e-3 < alpha.max() <= 1 - 1e-4  # stopped at the transmittance floor
+    _, alpha = rasterize(*corner_scene(), 40, 36, BG, RasterSettings(tile_size=4, backend="compiled"))
+    assert (alpha[12:, 12:] == 0).all() and alpha[:8, :8].max() > 0.1
+
+
+def test_compiled_matches_dense_reference():
+    scene = random_2d_scene(30, 24, 20)
+    settings = RasterSettings(tile_size=4, backend="compiled")
+    img, alpha, leaves = _run(rasterize, scene, 24, 20, settings)
+    img_ref, alpha_ref, ref_leaves = _run(rasterize_reference, scene, 24, 20, settings)
+    torch.testing.assert_close(img, img_ref, atol=1e-10, rtol=0)
+    torch.testing.assert_close(alpha, alpha_ref, atol=1e-10, rtol=0)
+    for fast, ref in zip(_grads(img, alpha, leaves), _grads(img_ref, alpha_ref, ref_leaves)):
+        torch.testing.assert_close(fast, ref, atol=1e-9, rtol=1e-9)
+
+
+def test_gradcheck_compiled():
+    means2d, conics, opacities, colors, depths, radii = random_2d_scene(4, 6, 5, seed=2)
+    radii[:] = 6
+    settings = RasterSettings(tile_size=4, backend="compiled")
+    inputs = tuple(t.clone().requires_grad_(True) for t in (means2d, conics, opacities, colors, BG))
+    assert torch.autograd.gradcheck(lambda m, c, o, col, bg: rasterize(m, c, o, col, depths, radii, 6, 5, bg,
+                                                                       settings), inputs, eps=1e-6, atol=1e-5)
+
+
+def test_non_contiguous_and_mixed_dtype_inputs_are_converted():
+    means2d, conics, opacities, colors, depths, radii = random_2d_scene(30, 24, 20)
+    settings = RasterSettings(backend="compiled")
+    expected = rasterize(means2d, conics, opacities, colors, depths, radii, 24, 20, BG, settings)[0]
+    odd_means = means2d.T.contiguous().T  # same values, column-major strides
+    odd_colors = colors.float().requires_grad_(True)  # float32 colours with float64 geometry
+    image = rasterize(odd_means, conics, opacities, odd_colors, depths, radii, 24, 20, BG, settings)[0]
+    assert not odd_means.is_contiguous() and image.dtype == torch.float64
+    _assert_close_rel(image, expected, 1e-7, "image")
+    image.sum().backward()
+    assert odd_colors.grad.dtype == torch.float32 and odd_colors.grad.abs().sum() > 0
+
+
+def test_integer_inputs_are_rejected_with_the_dtype_named():
+    means2d, conics, opacities, colors, depths, radii = random_2d_scene(5, 8, 8)
+    with pytest.raises(UserError, match="torch.int64"):
+        rasterize(means2d.long(), conics, opacities, colors, depths, radii, 8, 8, BG,
+                  RasterSettings(backend="compiled"))
+
+
+def test_numba_threads_follow_torch():
+    import numba
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        rasterize(*random_2d_scene(5, 8, 8), 8, 8, BG, RasterSettings(backend="compiled"))
+        assert numba.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)
+
+
+def test_auto_takes_compiled_on_cpu(monkeypatch):
+    calls = []
+    from gaussian_renderer.compiled import ops
+    real = ops.rasterize_compiled
+    monkeypatch.setattr(ops, "rasterize_compiled", lambda *a: calls.append(1) or real(*a))
+    rasterize(*random_2d_scene(5, 8, 8), 8, 8, BG, RasterSettings(backend="auto"))
+    assert calls == [1]
+    rasterize(*random_2d_scene(5, 8, 8), 8, 8, BG, RasterSettings(backend="torch"))
+    assert calls == [1]
+
+
+def test_missing_numba(monkeypatch, caplog):
+    # Simulated import failure: auto falls back with one log line, an explicit request is a UserError.
+    monkeypatch.setattr(compiled, "numba_import_error", lambda: "No module named 'numba'")
+    monkeypatch.setattr(compiled, "_log_fallback", compiled._log_fallback.__wrapped__)
+    with pytest.raises(UserError, match="numba.*--raster_backend torch"):
+        RasterSettings(backend="compiled")
+    with caplog.at_level(logging.INFO, logger="gaussian_renderer.compiled"):
+        image, _ = rasterize(*random_2d_scene(5, 8, 8), 8, 8, BG, RasterSettings(backend="auto"))
+    assert image.shape == (3, 8, 8) and "pure-torch" in caplog.text
+
+
+def test_unknown_backend_is_a_user_error():
+    with pytest.raises(UserError, match="backend"):
+        RasterSettings(backend="cuda")
+
+
+def test_cli_compiled_without_numba_is_one_error_line(tiny_scene, tmp_path):
+    # numba made unimportable in the child (sys.modules entry None), then train.py run as __main__.
+    code = ("import runpy, sys; sys.modules['numba'] = None; sys.argv = sys.argv[1:]; "
+            "runpy.run_path('train.py', run_name='__main__')")
+    proc = run_cli("-c", code, "train.py", "-s", str(tiny_scene), "-m", str(tmp_path / "model"), "--raster_backend",
+                   "compiled", "--iterations", "1", "-q")
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and "numba" in lines[0] and "torch" in lines[0]
+    assert not (tmp_path / "model" / "cfg_args").exists()

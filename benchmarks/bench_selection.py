@@ -53,6 +53,29 @@ def median_time(fn, items) -> float:
     return statistics.median(times)
 
 
+def fisher_split(gaussians: GaussianModel, cameras: list, bg: torch.Tensor, settings: RasterSettings) -> None:
+    """Print the median time of the two parts of a view's Fisher blocks: the attribute Gram and the projection
+    Jacobian."""
+    from gaussian_renderer import attribute_gram, project_gaussians, projection_jacobian
+    from gaussian_renderer.sh import sh_to_colors
+    params = {k: v.detach() for k, v in gaussians.params.items()}
+
+    @torch.no_grad()
+    def gram(cam):
+        proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, cam.viewmat,
+                                 cam.intrinsics, cam.width, cam.height)
+        colors = sh_to_colors(gaussians.sh_coeffs, gaussians.means, cam.camera_center, gaussians.active_sh_degree)
+        attribute_gram(proj.means2d, proj.conics, gaussians.opacities, colors, proj.depths, proj.radii, cam.width,
+                       cam.height, bg, settings)
+
+    def jacobian(cam):
+        projection_jacobian(params["means"], params["quats"], params["log_scales"], params["logit_opacities"],
+                            gaussians.sh_coeffs.detach(), gaussians.active_sh_degree, cam.viewmat, cam.intrinsics,
+                            cam.width, cam.height)
+    print(f"Fisher blocks split: attribute_gram {1e3 * median_time(gram, cameras):.1f} ms | projection_jacobian "
+          f"{1e3 * median_time(jacobian, cameras):.1f} ms")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--model", default="output/quickstart", help="trained model directory")
@@ -70,6 +93,8 @@ def main() -> None:
     parser.add_argument("--pool_sizes", type=int, nargs="+", default=[24, 48, 0], help="0 = all candidates")
     parser.add_argument("--json", type=Path, default=None, help="where to write the results (default: results/)")
     parser.add_argument("--report", type=Path, default=None, help="only print the table of a results JSON")
+    parser.add_argument("--cost_only", action="store_true",
+                        help="stop after the step / Fisher timing, with the Gram vs projection-Jacobian split")
     parser.add_argument("--raster_backend", choices=("auto", "compiled", "torch"), default=None,
                         help="rasterizer backend (default: the model's cfg_args)")
     args = parser.parse_args()
@@ -111,6 +136,9 @@ def main() -> None:
     print(f"one training step (fwd+bwd+loss): {1e3 * t_step:.1f} ms | one view's Fisher blocks: "
           f"{1e3 * t_fisher:.1f} ms ({t_fisher / t_step:.2f}x a step) | one gain on cached blocks: "
           f"{1e3 * t_gain:.1f} ms")
+    if args.cost_only:
+        fisher_split(gaussians, [cams[v] for v in sample], bg, settings)
+        return
 
     cache, t_cache, cache_mb = {}, 0.0, 0.0
     if args.mode == "cached":

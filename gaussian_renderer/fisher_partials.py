@@ -15,6 +15,7 @@ import torch
 
 from gaussian_renderer.compiled import use_compiled
 from gaussian_renderer.projection import camera_center, project_gaussians
+from gaussian_renderer.projection_partials import projection_jacobian_closed_form
 from gaussian_renderer.rasterize import (NUM_GEOMETRY_ATTRIBUTES, _alpha_partials, _check_inputs,
                                          _color_alpha_partials, _composite, _from_image, _iterate_chunks,
                                          _scatter_rows, bin_gaussians)
@@ -132,14 +133,13 @@ def projection_jacobian(means: torch.Tensor, quats: torch.Tensor, log_scales: to
                         viewmat: torch.Tensor, intrinsics: torch.Tensor, width: int, height: int,
                         param_groups: tuple[str, ...] = ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
                         ) -> torch.Tensor:
-    """Jacobian of each Gaussian's 2D attributes w.r.t. its own raw parameters.
+    """Jacobian of each Gaussian's 2D attributes w.r.t. its own raw parameters, in closed form.
 
     2D attributes (A = 9): mean2d x, y, conic a, b, c, opacity, colour RGB. Raw parameters, in `param_groups`
     order: means (3), quats (4, unnormalised), log_scales (3), logit_opacities (1), sh_dc (3), and with "sh_rest"
-    the remaining SH coefficients (3 (K-1)). Gaussians are independent, so one backward pass per attribute gives
-    that row for every Gaussian at once (A passes, no loop over Gaussians). Where the colour clamp max(., 0) is
-    active the colour rows are 0 (as autograd of the renderer gives). Rows of culled Gaussians are finite but
-    meaningless (the rasterizer gives them no pixels).
+    the remaining SH coefficients (3 (K-1)). Forward-mode formulas (`projection_partials`), one batched pass; the
+    twin `projection_jacobian_autograd` gives the same by A backward passes. Where the colour clamp max(., 0) is
+    active the colour rows are 0. Rows of culled Gaussians are finite but meaningless (no pixels).
 
     Args:
         means: [N, 3]; quats: raw wxyz [N, 4]; log_scales: [N, 3]; logit_opacities: [N]; sh_coeffs: [N, K, 3]
@@ -149,6 +149,13 @@ def projection_jacobian(means: torch.Tensor, quats: torch.Tensor, log_scales: to
     Returns:
         J, in the dtype of `means`. [N, A, P]
     """
+    _check_jacobian_inputs(means, log_scales, logit_opacities, sh_coeffs, sh_degree, param_groups)
+    blocks = projection_jacobian_closed_form(means, quats, log_scales, logit_opacities, sh_coeffs, sh_degree, viewmat,
+                                             intrinsics, width, height, param_groups)
+    return torch.cat([blocks[g] for g in param_groups], dim=2)
+
+
+def _check_jacobian_inputs(means, log_scales, logit_opacities, sh_coeffs, sh_degree, param_groups) -> None:
     bad = [g for g in param_groups if g not in RAW_PARAMETER_GROUPS]
     if bad or len(set(param_groups)) != len(param_groups) or not param_groups:
         raise UserError(f"Fisher parameter groups {tuple(param_groups)} are invalid; choose distinct names from "
@@ -158,6 +165,25 @@ def projection_jacobian(means: torch.Tensor, quats: torch.Tensor, log_scales: to
         f"sh_coeffs must be [N,K,3] with N = {n}, K >= {num_sh_bases(sh_degree)}, got {tuple(sh_coeffs.shape)}"
     assert logit_opacities.shape == (n,), f"logit_opacities must be [N], got {tuple(logit_opacities.shape)}"
     assert log_scales.shape == (n, 3), f"log_scales must be [N,3], got {tuple(log_scales.shape)}"
+
+
+def projection_jacobian_autograd(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
+                                 logit_opacities: torch.Tensor, sh_coeffs: torch.Tensor, sh_degree: int,
+                                 viewmat: torch.Tensor, intrinsics: torch.Tensor, width: int, height: int,
+                                 param_groups: tuple[str, ...] = ("means", "quats", "log_scales", "logit_opacities",
+                                                                  "sh_dc")) -> torch.Tensor:
+    """`projection_jacobian` by autograd (its twin): Gaussians are independent, so one backward pass per
+    attribute gives that row for every Gaussian at once (A passes, no loop over Gaussians).
+
+    Args:
+        means: [N, 3]; quats: raw wxyz [N, 4]; log_scales: [N, 3]; logit_opacities: [N]; sh_coeffs: [N, K, 3]
+        sh_degree: active SH degree for the colour; viewmat [4, 4], intrinsics [4], width, height: the camera.
+        param_groups: which raw parameters form the columns, a subsequence of
+            ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest") in any order.
+    Returns:
+        J, in the dtype of `means`. [N, A, P]
+    """
+    _check_jacobian_inputs(means, log_scales, logit_opacities, sh_coeffs, sh_degree, param_groups)
     sh_dc, sh_rest = sh_coeffs[:, :1], sh_coeffs[:, 1:]
     raw = {"means": means, "quats": quats, "log_scales": log_scales, "logit_opacities": logit_opacities[:, None],
            "sh_dc": sh_dc, "sh_rest": sh_rest}

@@ -1,0 +1,56 @@
+"""Closed-form projection Jacobian (`projection_jacobian`) vs its autograd twin (`projection_jacobian_autograd`)."""
+import pytest
+import torch
+
+from gaussian_renderer.fisher_partials import projection_jacobian, projection_jacobian_autograd
+from tests.scenes import intrinsics_for, look_at_viewmat, random_gaussians
+
+W, H = 24, 18
+VIEW = look_at_viewmat((0.3, -2.5, 1.0))
+K = intrinsics_for(W, H, 50.0, cx=10.3, cy=8.6)  # off-centre principal point
+ALL = ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest")
+
+
+def scene(degree):
+    """Random Gaussians plus the awkward cases: behind the camera, far outside the frustum (x/z clamped in the
+    EWA Jacobian), colour clamped at 0 in some channels, a far-from-unit quaternion."""
+    p = random_gaussians(12, seed=3, sh_degree=degree, scale=0.2)
+    p["means"][0] = torch.tensor([0.3, -4.0, 1.2], dtype=torch.float64)  # behind the camera at (0.3, -2.5, 1)
+    p["means"][1] = torch.tensor([3.0, 0.0, 0.0], dtype=torch.float64)  # far right of the image: clamped x/z
+    p["means"][2] = torch.tensor([0.0, 0.0, -2.5], dtype=torch.float64)  # far below: clamped y/z
+    p["sh_coeffs"][3, 0, :2] = -4.0  # two colour channels clamped
+    p["quats"][4] *= 7.0
+    return p
+
+
+@pytest.mark.parametrize("degree", [0, 1, 2, 3])
+@pytest.mark.parametrize("groups", [ALL, ("sh_rest", "log_scales", "means")])
+def test_closed_form_matches_autograd(degree, groups):
+    p = scene(degree)
+    args = (p["means"], p["quats"], p["log_scales"], p["logit_opacities"], p["sh_coeffs"], degree, VIEW, K, W, H,
+            groups)
+    fast, twin = projection_jacobian(*args), projection_jacobian_autograd(*args)
+    assert fast.shape == twin.shape and fast.dtype == twin.dtype
+    torch.testing.assert_close(fast, twin, rtol=1e-10, atol=1e-10 * twin.abs().max().item())  # float64 rounding
+
+
+def test_awkward_cases_are_exercised():
+    p = scene(3)
+    jac = projection_jacobian(p["means"], p["quats"], p["log_scales"], p["logit_opacities"], p["sh_coeffs"], 3,
+                              VIEW, K, W, H, ALL)
+    assert (jac[3, 6:8] == 0).all() and jac[3, 8].abs().max() > 0  # clamped channels have zero colour rows
+    assert jac[1, 2:5, :3].abs().max() > 0  # clamped frustum: conic still moves with the mean (through z)
+
+
+def test_float32_close_to_float64():
+    p64 = scene(2)
+    p32 = {k: v.float() for k, v in p64.items()}
+    j64 = projection_jacobian(*(p64[k] for k in ("means", "quats", "log_scales", "logit_opacities", "sh_coeffs")),
+                              2, VIEW, K, W, H, ALL)
+    j32 = projection_jacobian(*(p32[k] for k in ("means", "quats", "log_scales", "logit_opacities", "sh_coeffs")),
+                              2, VIEW.float(), K.float(), W, H, ALL)
+    assert j32.dtype == torch.float32
+    visible = torch.ones(12, dtype=torch.bool)
+    visible[0] = False
+    err = (j32.double() - j64)[visible].abs().max() / j64[visible].abs().max()
+    assert err < 1e-5

@@ -30,7 +30,8 @@ def dense_jacobian(scene, settings):
     return dense.permute(1, 2, 3, 0, 4).reshape(HEIGHT * WIDTH, n, d, 6 + d)
 
 
-SETTINGS = [RasterSettings(), RasterSettings(tile_size=8, chunk_size=2), RasterSettings(tile_size=16, chunk_size=1)]
+SETTINGS = [RasterSettings(), RasterSettings(tile_size=8, chunk_size=2, backend="torch"),  # default: compiled
+            RasterSettings(tile_size=16, chunk_size=1, backend="torch")]
 
 
 @pytest.fixture(scope="module", params=range(len(SETTINGS)), ids=["default", "tile8-chunk2", "tile16-chunk1"])

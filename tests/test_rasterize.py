@@ -52,8 +52,9 @@ def _grads(image, alpha, leaves, seed=1):
     (1, 16, 16, 4, 8),
     (60, 40, 17, 16, 16),  # height not a multiple of the tile size
 ])
-def test_fast_matches_reference_forward_and_backward(n, width, height, tile, chunk):
-    settings = RasterSettings(tile_size=tile, chunk_size=chunk)
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_fast_matches_reference_forward_and_backward(n, width, height, tile, chunk, backend):
+    settings = RasterSettings(tile_size=tile, chunk_size=chunk, backend=backend)
     scene = random_2d_scene(n, width, height)
     img, alpha, fast_leaves = _run(rasterize, scene, width, height, settings)
     img_ref, alpha_ref, ref_leaves = _run(rasterize_reference, scene, width, height, settings)
@@ -113,7 +114,8 @@ def test_chunk_size_does_not_change_results():
     scene = random_2d_scene(30, width, height, seed=3)
     results = []
     for chunk in (1, 3, 1000):  # 1 and 3 force many chunks per tile list; 1000 is a single chunk
-        img, alpha, leaves = _run(rasterize, scene, width, height, RasterSettings(tile_size=16, chunk_size=chunk))
+        img, alpha, leaves = _run(rasterize, scene, width, height,
+                                  RasterSettings(tile_size=16, chunk_size=chunk, backend="torch"))
         results.append((img, alpha, *_grads(img, alpha, leaves)))
     for other in results[1:]:
         for a, b in zip(results[0], other):
@@ -134,7 +136,8 @@ def test_tile_cutoff_only_drops_pairs_the_alpha_test_skips():
     torch.testing.assert_close(alpha, alpha_all, atol=1e-10, rtol=0)
 
 
-def test_early_termination_matches_reference():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_early_termination_matches_reference(backend):
     # Opaque Gaussians stacked on one spot: transmittance reaches the 1e-4 floor and later ones are skipped.
     n = 12
     means2d = torch.full((n, 2), 4.0, dtype=torch.float64)
@@ -144,7 +147,7 @@ def test_early_termination_matches_reference():
     depths = torch.arange(n, dtype=torch.float64)
     radii = torch.full((n,), 6, dtype=torch.long)
     scene = (means2d, conics, opacities, colors, depths, radii)
-    settings = RasterSettings(tile_size=8, chunk_size=3)
+    settings = RasterSettings(tile_size=8, chunk_size=3, backend=backend)
     img, alpha, fast_leaves = _run(rasterize, scene, 8, 8, settings)
     img_ref, alpha_ref, ref_leaves = _run(rasterize_reference, scene, 8, 8, settings)
     torch.testing.assert_close(img, img_ref, atol=1e-12, rtol=0)  # float64 rounding
@@ -162,7 +165,7 @@ def test_early_termination_matches_reference():
 def test_gradcheck_fast_path():
     means2d, conics, opacities, colors, depths, radii = random_2d_scene(4, 6, 5, seed=2)
     radii[:] = 6
-    settings = RasterSettings(tile_size=4, chunk_size=2)
+    settings = RasterSettings(tile_size=4, chunk_size=2, backend="torch")  # compiled: test_compiled_rasterizer.py
     inputs = tuple(t.clone().requires_grad_(True) for t in (means2d, conics, opacities, colors, BG))
 
     def f(m, c, o, col, bg):

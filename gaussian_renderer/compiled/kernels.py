@@ -221,18 +221,23 @@ def _sum_slices(buf):
     return out
 
 
+NUM_MOMENTS = 15  # sum s dx^i dy^j for i + j <= 4, in the order of `gram`'s accumulators
+
+
 @njit(parallel=True, cache=True)
 def gram(offsets, ids, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
          trans_final, last_in, pixel_weights, num_slices):
-    """Per-Gaussian sums for the attribute Gram [N, 6 (6 + D) + 1]: the 6 x (6 + D) block
-    [v (|u|^2 v)^T | v (w u)^T] row-major (upper triangle of the 6 x 6 part only), then sum w^2, over pixels p
-    (weighted by pixel_weights [H, W]).
+    """Per-Gaussian moment sums for the attribute Gram, [N, 15 + 6 D + 1] (pixels p weighted by pixel_weights).
 
-    Per pair: u = dC/dalpha [D] = c T - B / (1 - alpha) (B = colour behind, background included),
-    v = dalpha / d(geometry) [6] (0 where alpha is clamped), w = alpha T.
+    Per pair: u = dC/dalpha [D] = c T - B / (1 - alpha) (B = colour behind, background included), w = alpha T,
+    and where alpha is not clamped v = dalpha / d(geometry) = alpha L m with m = (dx, dy, dx^2, dx dy, dy^2, 1)
+    and L a per-Gaussian constant (conic, 1 / opacity). So sum_p |u|^2 v v^T = L M L^T needs only the 15 moments
+    of s = |u|^2 alpha^2 over dx, dy (1, dx, dy, dx^2, dx dy, dy^2, dx^3, dx^2 dy, dx dy^2, dy^3, dx^4, dx^3 dy,
+    dx^2 dy^2, dx dy^3, dy^4), and sum_p w v u^T = L X with X [6, D] = sum_p w alpha m u^T (row-major); last,
+    sum_p w^2. `ops.assemble_gram` applies L once per Gaussian.
     """
     n, d = colors.shape
-    row_len = GEO * (GEO + d) + 1
+    row_len = NUM_MOMENTS + GEO * d + 1
     num_tiles = offsets.shape[0] - 1
     fx, fy, ix, iy = _pixel_offsets(tile_size)
     num_px = fx.shape[0]
@@ -242,9 +247,8 @@ def gram(offsets, ids, geom, colors, background, width, height, tile_size, tiles
         behind = np.empty((num_px, d))
         wpix = np.empty(num_px)
         last = np.empty(num_px, np.int32)
-        acc = np.empty(row_len)
+        cross = np.empty(GEO * d)
         u = np.empty(d)
-        v = np.empty(GEO)
         for t in range(sl, num_tiles, num_slices):
             px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
             longest = 0
@@ -263,7 +267,9 @@ def gram(offsets, ids, geom, colors, background, width, height, tile_size, tiles
                 g = ids[start + j]
                 mx, my = geom[g, 0] - px0, geom[g, 1] - py0
                 ca, cb, cc, o, cut = geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6]
-                acc[:] = 0.0
+                m0 = m1 = m2 = m3 = m4 = m5 = m6 = m7 = m8 = m9 = m10 = m11 = m12 = m13 = m14 = 0.0
+                ww = 0.0
+                cross[:] = 0.0
                 for p in range(num_px):
                     if j >= last[p]:
                         continue
@@ -271,8 +277,7 @@ def gram(offsets, ids, geom, colors, background, width, height, tile_size, tiles
                     power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
                     if power > 0.0 or power < cut:
                         continue
-                    gauss = math.exp(power)
-                    raw = o * gauss
+                    raw = o * math.exp(power)
                     alpha = min(alpha_max, raw)
                     if alpha < alpha_min:
                         continue
@@ -286,23 +291,51 @@ def gram(offsets, ids, geom, colors, background, width, height, tile_size, tiles
                         uu += u[ch] * u[ch]
                         behind[p, ch] += w * colors[g, ch]
                     trans[p] = t_front
+                    ww += wp * w * w
                     if raw < alpha_max:
-                        ax, ay = alpha * dx, alpha * dy
-                        v[0] = ca * ax + cb * ay
-                        v[1] = cb * ax + cc * ay
-                        v[2] = -0.5 * ax * dx
-                        v[3] = -ax * dy
-                        v[4] = -0.5 * ay * dy
-                        v[5] = gauss
-                        wuu, ww = wp * uu, wp * w
-                        for r in range(GEO):
-                            row = r * (GEO + d)
-                            vr = v[r]
-                            for q in range(r, GEO):
-                                acc[row + q] += wuu * vr * v[q]
-                            for ch in range(d):
-                                acc[row + GEO + ch] += ww * vr * u[ch]
-                    acc[row_len - 1] += wp * w * w
-                for a in range(row_len):
-                    buf[sl, g, a] += acc[a]
+                        xx, xy, yy = dx * dx, dx * dy, dy * dy
+                        s = wp * uu * alpha * alpha
+                        m0 += s
+                        m1 += s * dx
+                        m2 += s * dy
+                        m3 += s * xx
+                        m4 += s * xy
+                        m5 += s * yy
+                        m6 += s * xx * dx
+                        m7 += s * xx * dy
+                        m8 += s * dx * yy
+                        m9 += s * yy * dy
+                        m10 += s * xx * xx
+                        m11 += s * xx * xy
+                        m12 += s * xx * yy
+                        m13 += s * xy * yy
+                        m14 += s * yy * yy
+                        q = wp * w * alpha
+                        for ch in range(d):
+                            qu = q * u[ch]
+                            cross[ch] += qu * dx
+                            cross[d + ch] += qu * dy
+                            cross[2 * d + ch] += qu * xx
+                            cross[3 * d + ch] += qu * xy
+                            cross[4 * d + ch] += qu * yy
+                            cross[5 * d + ch] += qu
+                row = buf[sl, g]
+                row[0] += m0
+                row[1] += m1
+                row[2] += m2
+                row[3] += m3
+                row[4] += m4
+                row[5] += m5
+                row[6] += m6
+                row[7] += m7
+                row[8] += m8
+                row[9] += m9
+                row[10] += m10
+                row[11] += m11
+                row[12] += m12
+                row[13] += m13
+                row[14] += m14
+                for a in range(GEO * d):
+                    row[NUM_MOMENTS + a] += cross[a]
+                row[row_len - 1] += ww
     return _sum_slices(buf)

@@ -212,7 +212,8 @@ def main() -> None:
     parser.add_argument("--num_random_points", type=int, default=10_000, help="fresh model's points (train.py's)")
     parser.add_argument("--backends", default="torch",
                         help="comma-separated rasterizer backends to time: torch, compiled, auto")
-    parser.add_argument("--json", default=None, help="write the JSON here (default benchmarks/results/rasterize_<time>.json)")
+    parser.add_argument("--json", default=None,
+                        help="write the JSON here (default benchmarks/results/rasterize_<time>.json)")
     args = parser.parse_args()
     backends = args.backends.split(",")
     if args.resolution_scaling and len(backends) > 1:

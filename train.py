@@ -114,6 +114,7 @@ def validate_config(cfg: TrainConfig) -> None:
         raise UserError(f"--iterations must be positive, got {cfg.run.iterations}")
     if cfg.model.device == "cuda" and not torch.cuda.is_available():
         raise UserError("--device cuda was asked for but torch sees no CUDA device; use --device cpu")
+    raster_settings(cfg.pipeline)  # a bad or unavailable --raster_backend fails before anything is written
     a = cfg.active
     if a.method:
         make_selector(cfg)

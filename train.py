@@ -138,8 +138,10 @@ def default_model_path(cfg: TrainConfig) -> str:
 
 
 def training_step(state: TrainState, camera: Camera, cfg: TrainConfig, background: torch.Tensor,
-                  settings: RasterSettings, lr_schedule: PositionLRSchedule, extent: float) -> tuple[float, float]:
-    """One optimisation step on one view; returns (loss, psnr)."""
+                  settings: RasterSettings, lr_schedule: PositionLRSchedule,
+                  extent: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """One optimisation step on one view; returns (loss, psnr) as detached scalar tensors: reading them is a host
+    sync on a GPU, so the caller does it only when it logs. The finiteness guard is the step's one sync."""
     it = state.iteration + 1
     lr_schedule.apply(state.optimizer, it)
     if it % 1000 == 0:
@@ -156,9 +158,9 @@ def training_step(state: TrainState, camera: Camera, cfg: TrainConfig, backgroun
                                           camera.width, camera.height, it, extent)
         state.optimizer.step()
         state.optimizer.zero_grad(set_to_none=True)
-        train_psnr = float(psnr(out.image.detach(), gt))
+        train_psnr = psnr(out.image.detach(), gt)
     state.iteration = it
-    return loss.item(), train_psnr
+    return loss.detach(), train_psnr
 
 
 def next_view(state: TrainState, rng: random.Random) -> int:
@@ -315,8 +317,8 @@ def train_stage(run: Run, progress: tqdm) -> None:
         if run.eta is not None and (note := run.eta.after_iteration(state.iteration)) is not None:
             progress.write(note)
         if state.iteration % 10 == 0:
-            progress.set_postfix(loss=f"{loss:.4f}", psnr=f"{train_psnr:.2f}", gaussians=state.gaussians.num_gaussians,
-                                 views=len(state.train_views))
+            progress.set_postfix(loss=f"{loss.item():.4f}", psnr=f"{train_psnr.item():.2f}",
+                                 gaussians=state.gaussians.num_gaussians, views=len(state.train_views))
         if state.iteration in run_cfg.test_iterations:
             value = test_psnr(state.gaussians, run.scene.test_cameras, run.background, run.settings)
             progress.write(f"[iter {state.iteration}] test PSNR {value:.2f} dB" if value is not None

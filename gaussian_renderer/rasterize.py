@@ -164,7 +164,7 @@ def _chunk_pairs(bins: TileBins, tiles: torch.Tensor, start: int, means2d: torch
     cum = torch.cumprod(1 - alpha, dim=1)
     cum_test = trans_test[tiles][:, None, :] * cum
     stop = cum_test < settings.transmittance_min  # this pair and all behind it in the pixel are skipped
-    if bool(stop.any()):
+    if alpha.is_cuda or bool(stop.any()):  # on CUDA no host sync: the masked recompute is exact when none stops
         alpha = torch.where(stop, torch.zeros_like(alpha), alpha)
         cum = torch.cumprod(1 - alpha, dim=1)
     front = trans[tiles][:, None, :] * torch.cat([torch.ones_like(cum[:, :1]), cum[:, :-1]], dim=1)
@@ -229,13 +229,16 @@ def _color_alpha_partials(chunk: ChunkPairs, colors: torch.Tensor, final_color: 
 
 
 def _scatter_rows(values: torch.Tensor, ids: torch.Tensor, n: int) -> torch.Tensor:
-    """Sum rows [Ta, c, ...] into [n, ...] by Gaussian id, dropping the -1 padding."""
+    """Sum rows [Ta, c, ...] into [n, ...] by Gaussian id, dropping the -1 padding.
+
+    The padding goes to a spare row n instead of being masked out: boolean indexing would be a host sync per chunk
+    on a GPU, and each real row still receives the same values in the same order.
+    """
     flat_ids = ids.reshape(-1)
     flat = values.reshape(flat_ids.shape[0], -1)
-    keep = flat_ids >= 0
-    out = flat.new_zeros(n, flat.shape[1])
-    out.index_add_(0, flat_ids[keep], flat[keep])
-    return out.reshape(n, *values.shape[2:])
+    out = flat.new_zeros(n + 1, flat.shape[1])
+    out.index_add_(0, torch.where(flat_ids >= 0, flat_ids, n), flat)
+    return out[:n].reshape(n, *values.shape[2:])
 
 
 class _RasterizeFunction(torch.autograd.Function):

@@ -95,6 +95,10 @@ for method in ("lite_gs", "pop_gs"):
         print(f"- {method}: no result (timed out or failed; see gpu_check.log)")
         continue
     r = json.loads(f.read_text())
+    if "note" in r:
+        print(f"- {method}: {r['note']} (killed by its time limit); stage 0: {r['stage0_iterations']} iterations at "
+              f"{r['stage0_s_per_iteration']:.3f} s/iteration, {r['gaussians_start']} Gaussians")
+        continue
     print(f"- {method}: " + ", ".join(f"{k} {r[k]:.3f}" if isinstance(r[k], float) else f"{k} {r[k]}" for k in keys)
           + f" -> projected Setup 1 run {r['projected_run_s'] / 3600:.2f} h")
 print("\n## Host syncs\n\n```\n" + (out / "syncs.txt").read_text()[:6000] + "```")

@@ -79,6 +79,9 @@ def main() -> None:
         torch.cuda.reset_peak_memory_stats()
     n0 = run.state.gaussians.num_gaussians
     it0, sec0 = train_for(run, run.plan.stage_end[0], t_start + args.budget_s / 2, args.device)
+    partial = {"method": args.method, "gaussians_start": n0, "stage0_iterations": it0,
+               "stage0_s_per_iteration": sec0 / max(it0, 1), "load_s": load_s, "note": "acquisition did not finish"}
+    (out / f"slice_{args.method}.json").write_text(json.dumps(partial, indent=2) + "\n")  # kept if killed later
     progress = tqdm(disable=True)
     t0 = time.perf_counter()
     train.acquire(run, progress)

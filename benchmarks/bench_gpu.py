@@ -23,6 +23,7 @@ Writes <out>/bench_gpu.json and <out>/bench_gpu.md (default benchmarks/results/)
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import math
 import os
@@ -185,9 +186,7 @@ def gsplat_compiles(timeout_s: float) -> tuple[bool, str]:
 
 
 def gsplat_status(device: torch.device, timeout_s: float) -> tuple[bool, str]:
-    try:
-        import gsplat  # noqa: F401
-    except ImportError:
+    if importlib.util.find_spec("gsplat") is None:  # not imported here: its import may start the JIT build
         return False, "gsplat is not installed: skipped (install gsplat==1.5.3 to compare)"
     if device.type != "cuda":
         return False, "gsplat needs CUDA: skipped on this device"

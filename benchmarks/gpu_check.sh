@@ -59,6 +59,7 @@ fi
 if [ "$DEVICE" = cuda ]; then
   BENCH=(--device cuda); SLICE=(--device cuda --resolution 1 --num_points 100000 --budget_s "$SLICE_BUDGET_S")
   SYNCS=(--device cuda); PYTEST_MARK=cuda
+  export TORCH_CUDA_ARCH_LIST="${TORCH_CUDA_ARCH_LIST:-9.0}" MAX_JOBS="${MAX_JOBS:-14}"  # build for Hopper only
   # gsplat's JIT build (~minutes, CPU cores) runs beside the GPU steps; bench_gpu then loads the cached build.
   ( PYTHONPATH="$ROOT/benchmarks${PYTHONPATH:+:$PYTHONPATH}" timeout 250 "$PY" -c \
       'import bench_gpu as b; print(b.gsplat_status(b.torch.device("cuda"), 240)[1])' >/tmp/gpu_check_gsplat.txt 2>&1 ) &

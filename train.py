@@ -22,12 +22,13 @@ import torch
 from tqdm import tqdm
 
 from active import Selector, SelectionContext, build_selector_from, list_selectors
-from active.fisher import FisherOracle
+from active.fisher import build_oracle
 from active.registry import selector_options_dataclass
 from active.schedule import StagePlan, farthest_point_views, plan_stages
 from arguments import (ActiveConfig, ModelConfig, PipelineConfig, RunConfig, add_config_args, config_from_args,
                        config_to_dict)
 from gaussian_renderer import RasterSettings, render
+from gaussian_renderer.projection import camera_centers, look_at_point
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 from scene.resolution_policy import training_resolution
@@ -192,12 +193,15 @@ def select_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: Se
     t0 = time.perf_counter()
     oracle = None
     if selector.uses_oracle:
-        oracle = FisherOracle.build(state.gaussians, scene.train_cameras, state.train_views, background, settings,
-                                    sigma=a.sigma, delta_rel=a.delta_rel, delta_abs=a.delta_abs,
-                                    param_groups=a.fisher_params, mode=a.fisher_mode, cache_mb=a.fisher_cache_mb)
+        oracle = build_oracle(selector.oracle_kind, state.gaussians, scene.train_cameras, state.train_views,
+                              background, settings, sigma=a.sigma, delta_rel=a.delta_rel, delta_abs=a.delta_abs,
+                              param_groups=a.fisher_params, mode=a.fisher_mode, cache_mb=a.fisher_cache_mb)
     generator = torch.Generator().manual_seed(cfg.run.seed * 100_003 + state.stage)
+    viewmats = torch.stack([c.viewmat.cpu() for c in scene.train_cameras])  # [V, 4, 4]
     selection = selector.select(SelectionContext(candidate_ids=candidates, oracle=oracle, generator=generator,
-                                                 stage=state.stage), k)
+                                                 stage=state.stage, train_ids=tuple(state.train_views),
+                                                 camera_centers=camera_centers(viewmats),
+                                                 scene_center=look_at_point(viewmats)), k)
     select_seconds = time.perf_counter() - t0
     return {
         "stage": state.stage,

@@ -1,7 +1,9 @@
 """Types shared by the selectors: the context a selector receives, what it returns, the oracle it may call.
 
-A selector depends only on the `GainOracle` protocol (gain, commit, evaluated), never on how the Fisher blocks are
-made, and never changes training state: it returns a `Selection` and `train.py` moves the chosen views.
+A selector depends only on the protocol of the oracle kind it declares (`Selector.oracle_kind`): "logdet" gives a
+`GainOracle` (gain, commit, evaluated), "diagonal" a `DiagonalOracle` (per-view diagonal Fisher, commit, evaluated).
+It never depends on how the Fisher blocks are made, and never changes training state: it returns a `Selection` and
+`train.py` moves the chosen views.
 Evaluations are counted in one place, the oracle (`evaluated`); a selector reports only its `conservative` count,
 which its own `conservative_count(m, k)` states in closed form.
 """
@@ -28,6 +30,21 @@ class GainOracle(Protocol):
         """S <- S + {v} (not an oracle evaluation)."""
 
 
+class DiagonalOracle(Protocol):
+    """Diagonal Fisher information per parameter: the prior of the training views plus the committed views, and any
+    candidate view's diagonal; counts its own evaluations."""
+
+    evaluated: int  # candidate diagonals returned so far (every call of `diagonal`)
+    columns: dict[str, slice]  # parameter group (e.g. "means") -> its columns of P
+    information: torch.Tensor  # h = diag of (prior of the training views + committed views), float64 [N, P]
+
+    def diagonal(self, view_id: int) -> torch.Tensor:
+        """diag(H_v) of one candidate view, float64 [N, P]: one oracle evaluation."""
+
+    def commit(self, view_id: int) -> None:
+        """h <- h + diag(H_v) (not an oracle evaluation)."""
+
+
 @dataclass(frozen=True)
 class Selection:
     """What a selector returns for one acquisition step."""
@@ -42,9 +59,12 @@ class SelectionContext:
     """Everything a selector may use."""
 
     candidate_ids: list[int]  # the pool V_c (views not yet in training), distinct ids
-    oracle: GainOracle | None  # may be None only for selectors with uses_oracle = False
+    oracle: GainOracle | DiagonalOracle | None  # of the selector's `oracle_kind`; None only if uses_oracle = False
     generator: torch.Generator  # seeded per stage by the caller: a fresh draw per stage
     stage: int
+    train_ids: tuple[int, ...] = ()  # the current training views (ids of the same pool)
+    camera_centers: torch.Tensor | None = None  # world centres of every view of the pool, row = view id [V, 3]
+    scene_center: torch.Tensor | None = None  # the point the pool's cameras look at (least squares) [3]
 
 
 class Selector:
@@ -58,6 +78,7 @@ class Selector:
 
     name: str = ""  # set by `register_selector`
     uses_oracle: bool = True  # False: `select` calls no gains (it still commits its picks when given an oracle)
+    oracle_kind: str = "logdet"  # which oracle `ctx.oracle` is: "logdet" (GainOracle) or "diagonal" (DiagonalOracle)
     config: Any = None  # the options dataclass instance, for selectors registered with one
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:

@@ -13,6 +13,11 @@ Approximation (as in the LiTe-GS paper, following FisherRF/POP-GS):
   brute-force `torch.autograd.functional.jacobian` of the rendered image.
 * Prior H_0 = sum over the training views of H_v plus a ridge (see `active.logdet.BlockInformation`).
 
+Diagonal variant (FisherRF's approximation): `fisher_view_diagonals` gives diag(H_v) [N, P] from the same Gram and
+projection Jacobian without forming the blocks (diag(J^T G J)_p = sum_ab J_ap G_ab J_bp), over every raw parameter
+group; `DiagonalFisherOracle` serves it to selectors whose `oracle_kind` is "diagonal". `build_oracle(kind, ...)` is
+the one entry point train.py calls, with the kind the selector declares.
+
 `FisherOracle.build(...)` returns the one object the selectors call (`gain`, `commit`, `evaluated`: the
 `GainOracle` protocol, by inheritance from `active.logdet.BlockGainOracle`); its `FisherViewBlocks` supplies the
 blocks. Modes: "cached" keeps each candidate's blocks for the stage (an oracle is then a batched log-det update);
@@ -26,11 +31,13 @@ import logging
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
+from typing import Callable
 
 import torch
 
 from active.logdet import BlockGainOracle, BlockInformation
 from gaussian_renderer import RasterSettings, attribute_gram, project_gaussians, projection_jacobian
+from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from gaussian_renderer.sh import sh_to_colors
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
@@ -63,6 +70,38 @@ def fisher_view_blocks(gaussians: GaussianModel, camera: Camera, background: tor
     Returns:
         float64 blocks. [N, P, P]
     """
+    jac, gram = _jacobian_and_gram(gaussians, camera, background, settings, param_groups)
+    blocks = jac.transpose(1, 2) @ gram @ jac  # [N, P, P]
+    return blocks / (sigma * sigma)
+
+
+def fisher_view_diagonals(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
+                          settings: RasterSettings, sigma: float = 1.0,
+                          param_groups: tuple[str, ...] = RAW_PARAMETER_GROUPS) -> torch.Tensor:
+    """The diagonals of `fisher_view_blocks`, sigma^-2 sum_pixels,channels (dI/dtheta_p)^2 per raw parameter, without
+    forming the P x P blocks.
+
+    Returns:
+        float64 diagonals. [N, P]
+    """
+    jac, gram = _jacobian_and_gram(gaussians, camera, background, settings, param_groups)
+    return torch.einsum("nap,nab,nbp->np", jac, gram, jac) / (sigma * sigma)
+
+
+def parameter_columns(gaussians: GaussianModel, param_groups: tuple[str, ...]) -> dict[str, slice]:
+    """The columns of each parameter group in a Fisher block or diagonal over `param_groups` (their widths from the
+    model: means 3, quats 4, log_scales 3, logit_opacities 1, sh_dc 3, sh_rest 3((d+1)^2 - 1))."""
+    columns, start = {}, 0
+    for group in param_groups:
+        width = gaussians.params[group].shape[1:].numel()
+        columns[group] = slice(start, start + width)
+        start += width
+    return columns
+
+
+def _jacobian_and_gram(gaussians: GaussianModel, camera: Camera, background: torch.Tensor, settings: RasterSettings,
+                       param_groups: tuple[str, ...]) -> tuple[torch.Tensor, torch.Tensor]:
+    """J_proj [N, A, P] and G [N, A, A] of one view, float64."""
     with torch.no_grad():
         proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, camera.viewmat,
                                  camera.intrinsics, camera.width, camera.height)
@@ -75,13 +114,13 @@ def fisher_view_blocks(gaussians: GaussianModel, camera: Camera, background: tor
                               params["logit_opacities"].detach(), gaussians.sh_coeffs.detach(),
                               gaussians.active_sh_degree, camera.viewmat, camera.intrinsics, camera.width,
                               camera.height, param_groups=param_groups).double()  # [N, A, P]
-    blocks = jac.transpose(1, 2) @ gram @ jac  # [N, P, P]
-    return blocks / (sigma * sigma)
+    return jac, gram
 
 
 @dataclass
 class FisherViewBlocks:
-    """Per-view Fisher blocks of one model: computed on demand, kept in an LRU cache (cached mode) or not (streaming)."""
+    """Per-view Fisher blocks of one model: computed on demand, kept in an LRU cache (cached mode) or not (streaming).
+    With `diagonal` set it supplies the blocks' diagonals instead ([N, P], `fisher_view_diagonals`)."""
 
     gaussians: GaussianModel
     cameras: list[Camera]
@@ -91,15 +130,17 @@ class FisherViewBlocks:
     param_groups: tuple[str, ...]
     streaming: bool
     cache_bytes: int
+    diagonal: bool = False  # diagonals [N, P] instead of blocks [N, P, P]
     views_computed: int = 0  # distinct views whose blocks were computed (candidates; prior views not counted)
     fisher_seconds: float = 0.0  # time spent computing blocks, prior included
     _cache: "OrderedDict[int, torch.Tensor]" = field(default_factory=OrderedDict)
     _seen: set = field(default_factory=set)
 
     def compute(self, view_id: int) -> torch.Tensor:
-        """The blocks of `cameras[view_id]`, timed, never cached. [N, P, P] float64"""
+        """The blocks (or diagonals) of `cameras[view_id]`, timed, never cached. [N, P, P] or [N, P] float64"""
         t0 = time.perf_counter()
-        blocks = fisher_view_blocks(self.gaussians, self.cameras[view_id], self.background, self.settings,
+        kernel = fisher_view_diagonals if self.diagonal else fisher_view_blocks
+        blocks = kernel(self.gaussians, self.cameras[view_id], self.background, self.settings,
                                     self.sigma, self.param_groups)
         self.fisher_seconds += time.perf_counter() - t0
         return blocks
@@ -156,16 +197,96 @@ class FisherOracle(BlockGainOracle):
               settings: RasterSettings, *, sigma: float = 1.0, delta_rel: float = 1e-6, delta_abs: float = 1e-8,
               param_groups: str = "default", mode: str = "cached", cache_mb: int = 0) -> "FisherOracle":
         """Compute the prior from `train_views` and return an oracle over the other views of `cameras`."""
-        budget = cache_mb * (1 << 20) if cache_mb > 0 else available_memory_bytes() // 4
         source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, FISHER_PARAM_GROUPS[param_groups],
-                                  mode == "streaming", budget)
-        prior = None
-        for v in train_views:
-            blocks = source.compute(v)
-            prior = blocks if prior is None else prior.add_(blocks)
-        num_candidates = len(cameras) - len(train_views)
-        estimate = num_candidates * prior.numel() * prior.element_size()
-        if not source.streaming and estimate > budget:
-            source.use_streaming(f"the Fisher cache would need {estimate / 2**20:.0f} MB for {num_candidates} "
-                                 f"candidate views (budget {budget / 2**20:.0f} MB, --fisher_cache_mb)")
+                                  mode == "streaming", _cache_budget(cache_mb))
+        prior = _prior(source, train_views, len(cameras))
         return cls(BlockInformation(prior, delta_rel=delta_rel, delta_abs=delta_abs), source)
+
+
+class DiagonalGainOracle:
+    """A counted `active.base.DiagonalOracle`: h = the prior diagonal plus the committed views' diagonals, and any
+    candidate's diagonal from `view_diagonals(view_id)` [N, P] (which may cache or recompute). No ridge: a selector
+    adds its own regulariser."""
+
+    def __init__(self, information: torch.Tensor, view_diagonals: Callable[[int], torch.Tensor],
+                 columns: dict[str, slice]):
+        self.information = information.double()  # h [N, P]
+        self.view_diagonals = view_diagonals
+        self.columns = columns  # parameter group -> its columns of P
+        self.evaluated = 0
+
+    def diagonal(self, view_id: int) -> torch.Tensor:
+        """diag(H_v) [N, P]: one oracle evaluation."""
+        self.evaluated += 1
+        return self.view_diagonals(view_id).double()
+
+    def commit(self, view_id: int) -> None:
+        """h <- h + diag(H_v) (not an oracle evaluation; in streaming mode the diagonal is recomputed)."""
+        self.information = self.information + self.view_diagonals(view_id).double()
+
+    def reset_counts(self) -> None:
+        self.evaluated = 0
+
+
+class DiagonalFisherOracle(DiagonalGainOracle):
+    """The counted diagonal Fisher oracle of one acquisition step, over every raw parameter group of the model."""
+
+    def __init__(self, information: torch.Tensor, view_diagonals: FisherViewBlocks):
+        super().__init__(information, view_diagonals,
+                         parameter_columns(view_diagonals.gaussians, view_diagonals.param_groups))
+        self.blocks = view_diagonals
+
+    @property
+    def views_computed(self) -> int:
+        """Distinct candidate views whose diagonals were computed."""
+        return self.blocks.views_computed
+
+    @property
+    def fisher_seconds(self) -> float:
+        """Seconds spent computing diagonals, the prior included."""
+        return self.blocks.fisher_seconds
+
+    @classmethod
+    def build(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int], background: torch.Tensor,
+              settings: RasterSettings, *, sigma: float = 1.0, mode: str = "cached",
+              cache_mb: int = 0) -> "DiagonalFisherOracle":
+        """The prior diagonal of `train_views` and an oracle over the other views of `cameras`."""
+        source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, RAW_PARAMETER_GROUPS,
+                                  mode == "streaming", _cache_budget(cache_mb), diagonal=True)
+        return cls(_prior(source, train_views, len(cameras)), source)
+
+
+def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
+                 background: torch.Tensor, settings: RasterSettings, *, sigma: float = 1.0, delta_rel: float = 1e-6,
+                 delta_abs: float = 1e-8, param_groups: str = "default", mode: str = "cached",
+                 cache_mb: int = 0) -> FisherOracle | DiagonalFisherOracle:
+    """The oracle of `kind` (a selector's `oracle_kind`): "logdet" -> `FisherOracle` (ridge and `param_groups`
+    apply), "diagonal" -> `DiagonalFisherOracle` (every raw parameter group, no ridge)."""
+    if kind == "logdet":
+        return FisherOracle.build(gaussians, cameras, train_views, background, settings, sigma=sigma,
+                                  delta_rel=delta_rel, delta_abs=delta_abs, param_groups=param_groups, mode=mode,
+                                  cache_mb=cache_mb)
+    if kind == "diagonal":
+        return DiagonalFisherOracle.build(gaussians, cameras, train_views, background, settings, sigma=sigma,
+                                          mode=mode, cache_mb=cache_mb)
+    raise ValueError(f"unknown oracle kind {kind!r} (a selector's oracle_kind is 'logdet' or 'diagonal')")
+
+
+def _cache_budget(cache_mb: int) -> int:
+    """--fisher_cache_mb in bytes (0: a quarter of the available memory)."""
+    return cache_mb * (1 << 20) if cache_mb > 0 else available_memory_bytes() // 4
+
+
+def _prior(source: FisherViewBlocks, train_views: list[int], num_views: int) -> torch.Tensor:
+    """The sum of the training views' blocks (or diagonals); switches `source` to streaming when the candidates'
+    cache would exceed its budget. [N, P, P] or [N, P]"""
+    prior = None
+    for v in train_views:
+        blocks = source.compute(v)
+        prior = blocks if prior is None else prior.add_(blocks)
+    num_candidates = num_views - len(train_views)
+    estimate = num_candidates * prior.numel() * prior.element_size()
+    if not source.streaming and estimate > source.cache_bytes:
+        source.use_streaming(f"the Fisher cache would need {estimate / 2**20:.0f} MB for {num_candidates} "
+                             f"candidate views (budget {source.cache_bytes / 2**20:.0f} MB, --fisher_cache_mb)")
+    return prior

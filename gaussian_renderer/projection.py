@@ -20,6 +20,29 @@ def camera_center(viewmat: torch.Tensor) -> torch.Tensor:
     return -viewmat[:3, :3].T @ viewmat[:3, 3]
 
 
+def camera_centers(viewmats: torch.Tensor) -> torch.Tensor:
+    """`camera_center` of a stack of world-to-camera matrices. [C, 4, 4] -> [C, 3]"""
+    rot, trans = viewmats[:, :3, :3], viewmats[:, :3, 3]
+    return -(rot.transpose(1, 2) @ trans[:, :, None])[:, :, 0]
+
+
+def look_at_point(viewmats: torch.Tensor) -> torch.Tensor:
+    """The point closest, in least squares, to every camera's optical axis (the scene centre the cameras look at).
+
+    Minimises sum_c |(I - d_c d_c^T)(x - o_c)|^2 over x, with o_c the centre and d_c the viewing direction (+z of the
+    camera frame) of camera c; a small ridge towards the mean centre keeps parallel axes well posed. [C, 4, 4] -> [3]
+    """
+    centers = camera_centers(viewmats).double()  # [C, 3]
+    dirs = viewmats[:, 2, :3].double()  # camera +z in world coordinates (rows of R) [C, 3]
+    dirs = dirs / dirs.norm(dim=-1, keepdim=True)
+    eye = torch.eye(3, dtype=torch.float64, device=viewmats.device)
+    proj = eye - dirs[:, :, None] * dirs[:, None, :]  # [C, 3, 3]
+    ridge = 1e-9 * len(centers)
+    lhs = proj.sum(0) + ridge * eye
+    rhs = (proj @ centers[:, :, None]).sum(0)[:, 0] + ridge * centers.mean(0)
+    return torch.linalg.solve(lhs, rhs).to(viewmats.dtype)
+
+
 def quat_to_rotmat(quats: torch.Tensor) -> torch.Tensor:
     """Rotation matrices from quaternions (wxyz, normalised inside).
 

@@ -8,6 +8,7 @@ import torch
 
 from active import build_selector, list_selectors
 from active.base import SelectionContext
+from active.fisher import DiagonalGainOracle
 from active.logdet import BlockGainOracle, BlockInformation
 from active.oracle_counts import mean_rounded_up, schedule_counts
 from tests.test_logdet import random_blocks, single_thread  # noqa: F401  (autouse fixture)
@@ -35,7 +36,8 @@ def static_subset(m: int, k: int, eps: float) -> int:
 
 
 FORMULAS = {"pop_gs": lambda m, k, eps: exhaustive(m, k), "lite_gs": stochastic, "ssg": static_subset,
-            "random": lambda m, k, eps: 0}
+            "random": lambda m, k, eps: 0, "fisherrf": lambda m, k, eps: exhaustive(m, k),
+            "coverage": lambda m, k, eps: 0}
 
 
 def selector(method: str, eps: float):
@@ -102,11 +104,18 @@ def test_lite_gs_count_does_not_grow_with_k():
 def test_selector_reports_the_formula_and_the_oracle_counts_evaluations(method, k, eps):
     m = 40
     blocks = random_blocks(m + 1, 3, 2, seed=k)
-    oracle = BlockGainOracle(BlockInformation(blocks[0]), lambda v: blocks[v + 1])
-    ctx = SelectionContext(list(range(m)), oracle, torch.Generator().manual_seed(0), 0)
-    sel = selector(method, eps).select(ctx, k)
+    if selector(method, eps).oracle_kind == "diagonal":  # the blocks' diagonals, two columns named "means"
+        diagonals = torch.diagonal(blocks, dim1=-2, dim2=-1)  # [m + 1, 3, 2]
+        oracle = DiagonalGainOracle(diagonals[0], lambda v: diagonals[v + 1], {"means": slice(0, 2)})
+        sel_object = build_selector(method, fisherrf_params="means")
+    else:
+        oracle = BlockGainOracle(BlockInformation(blocks[0]), lambda v: blocks[v + 1])
+        sel_object = selector(method, eps)
+    centers = torch.randn(m, 3, generator=torch.Generator().manual_seed(k))
+    ctx = SelectionContext(list(range(m)), oracle, torch.Generator().manual_seed(0), 0, camera_centers=centers)
+    sel = sel_object.select(ctx, k)
     assert sel.conservative == FORMULAS[method](m, k, eps)
     assert oracle.evaluated <= sel.conservative
-    if method == "pop_gs":
+    if method in ("pop_gs", "fisherrf"):
         assert oracle.evaluated == sel.conservative
     assert len(set(sel.ids)) == len(sel.ids) == k

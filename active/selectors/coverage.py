@@ -1,0 +1,84 @@
+"""`coverage`: farthest-point sampling of the cameras from the current training set (as in "NeRF Director").
+
+Each pick is the candidate whose point is farthest from its nearest neighbour among the training views and the
+picks so far; ties go to the lowest view id. The points are the camera centres (`--coverage_space centers`) or the
+viewing directions on the unit sphere around the scene centre, (c - o) / |c - o| with o the point the cameras look
+at (`--coverage_space directions`; it ignores how far a camera stands). No oracle: the count is 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import torch
+
+from active.base import Selection, SelectionContext, Selector, check_k
+from active.registry import register_selector
+from utils.errors import UserError
+
+SPACES = ("centers", "directions")
+
+
+def coverage_points(ctx: SelectionContext, space: str) -> torch.Tensor:
+    """The points farthest-point sampling works on, one row per view id. [V, 3]"""
+    if ctx.camera_centers is None or (space == "directions" and ctx.scene_center is None):
+        raise ValueError("the coverage selector needs camera_centers (and scene_center for directions) "
+                         "in the SelectionContext")
+    centers = ctx.camera_centers.double()
+    if space == "centers":
+        return centers
+    offsets = centers - ctx.scene_center.double()
+    return offsets / offsets.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+
+def farthest_point_picks(points: torch.Tensor, chosen: list[int], candidates: list[int], k: int) -> list[int]:
+    """`k` candidates by farthest-point sampling from `chosen` (no chosen views: start from the lowest candidate id).
+
+    Args:
+        points: one point per view id. [V, D]
+    """
+    pool = sorted(candidates)
+    cand = points[pool]  # [M, D]
+    if chosen:
+        dist = torch.cdist(cand, points[list(chosen)]).amin(dim=1)  # [M]
+    else:
+        dist = torch.full((len(pool),), float("inf"), dtype=points.dtype)
+    picks = []
+    for _ in range(min(k, len(pool))):
+        best = int(torch.argmax(dist))  # the first maximum: the lowest id
+        picks.append(pool[best])
+        dist = torch.minimum(dist, (cand - cand[best]).norm(dim=-1))
+        dist[best] = -1.0  # never again
+    return picks
+
+
+@dataclass(frozen=True)
+class CoverageConfig:
+    coverage_space: str = field(default="centers", metadata={"help": "farthest-point sampling of camera centres, or "
+                                                                     "of viewing directions on the unit sphere around "
+                                                                     "the scene centre ('directions')"})
+
+    def __post_init__(self) -> None:
+        if self.coverage_space not in SPACES:
+            raise UserError(f"--coverage_space must be one of {', '.join(SPACES)}, got {self.coverage_space!r}")
+
+
+@register_selector("coverage", config=CoverageConfig)
+class CoverageSelector(Selector):
+    """Camera coverage: the candidate farthest from the training views, K times."""
+
+    uses_oracle = False
+
+    def __init__(self, config: CoverageConfig = CoverageConfig()):
+        self.config = config
+
+    def conservative_count(self, m: int, k: int) -> int:
+        return 0
+
+    def select(self, ctx: SelectionContext, k: int) -> Selection:
+        check_k(k)
+        ids = farthest_point_picks(coverage_points(ctx, self.config.coverage_space), list(ctx.train_ids),
+                                   ctx.candidate_ids, k)
+        if ctx.oracle is not None:
+            for view in ids:
+                ctx.oracle.commit(view)
+        return Selection(ids, [0.0] * len(ids), 0)

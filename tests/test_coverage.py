@@ -1,0 +1,100 @@
+"""coverage: farthest-point picks against a written-out twin, both spaces; the camera geometry train.py puts in the
+SelectionContext (centres, look-at point) against known cameras; an end-to-end coverage and fisherrf run."""
+import json
+import math
+
+import pytest
+import torch
+
+from active import build_selector
+from active.base import SelectionContext
+from active.selectors.coverage import farthest_point_picks
+from gaussian_renderer.projection import camera_center, camera_centers, look_at_point
+from scene.scene import Scene
+from tests.conftest import run_cli
+from tests.scenes import look_at_viewmat
+from utils.errors import UserError
+
+
+def fps_written_out(points, chosen, candidates, k):
+    """Each pick: the candidate with the largest distance to its nearest chosen point, the lowest id on ties."""
+    chosen, picks = list(chosen), []
+    for _ in range(min(k, len(candidates))):
+        def nearest(v):
+            return min((math.dist(points[v], points[c]) for c in chosen), default=math.inf)
+        best = max((v for v in sorted(candidates) if v not in picks), key=lambda v: (nearest(v), -v))
+        picks.append(best)
+        chosen.append(best)
+    return picks
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_farthest_point_picks_equal_the_written_out_twin(seed):
+    points = torch.randn(30, 3, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
+    candidates = [v for v in range(30) if v % 4 != 1]
+    for chosen in ([1, 5], []):
+        expected = fps_written_out(points.tolist(), chosen, candidates, 6)
+        assert farthest_point_picks(points, chosen, candidates, 6) == expected
+    assert sorted(farthest_point_picks(points, [1], candidates, 99)) == sorted(candidates)
+
+
+def test_exact_ties_go_to_the_lowest_id():
+    points = torch.tensor([[0.0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]])
+    assert farthest_point_picks(points, [0], [4, 3, 2, 1], 2) == [1, 2]
+
+
+def eyes():
+    """Six cameras around the origin at mixed distances, all looking at (0.2, -0.1, 0.3)."""
+    return [(3.0, 0, 1), (0, 6.0, 1.5), (-2.0, 0.5, 0.5), (0.5, -4.0, 2.0), (1.0, 1.0, 3.0), (-5.0, -5.0, 1.0)]
+
+
+def test_camera_geometry_of_known_cameras():
+    target = (0.2, -0.1, 0.3)
+    viewmats = torch.stack([look_at_viewmat(e, target) for e in eyes()])
+    torch.testing.assert_close(camera_centers(viewmats), torch.tensor(eyes(), dtype=torch.float64))
+    torch.testing.assert_close(camera_centers(viewmats)[2], camera_center(viewmats[2]))
+    torch.testing.assert_close(look_at_point(viewmats), torch.tensor(target, dtype=torch.float64), atol=1e-6,
+                               rtol=0)
+
+
+def test_directions_ignore_the_distance():
+    target = torch.tensor((0.2, -0.1, 0.3), dtype=torch.float64)
+    viewmats = torch.stack([look_at_viewmat(e, tuple(target.tolist())) for e in eyes()])
+    centers = camera_centers(viewmats)
+    centers = torch.cat([centers, (target + 3.0 * (centers[0] - target))[None]])  # view 6: view 0's direction, 3x as far
+    ctx = SelectionContext([2, 3, 4, 5, 6], None, torch.Generator(), 0, train_ids=(0, 1), camera_centers=centers,
+                           scene_center=target)
+    units = (centers - target) / (centers - target).norm(dim=-1, keepdim=True)
+    sel = build_selector("coverage", coverage_space="directions").select(ctx, 5)
+    assert sel.ids == fps_written_out(units.tolist(), [0, 1], [2, 3, 4, 5, 6], 5) and sel.ids[-1] == 6
+    assert sel.conservative == 0 and sel.gains == [0.0] * 5
+    by_centres = build_selector("coverage").select(ctx, 5)
+    assert by_centres.ids == fps_written_out(centers.tolist(), [0, 1], [2, 3, 4, 5, 6], 5)
+    with pytest.raises(UserError, match="--coverage_space"):
+        build_selector("coverage", coverage_space="sphere")
+
+
+ACTIVE = ["--num_init_views", "2", "--views_per_step", "2", "--max_views", "6", "--iters_per_view", "2",
+          "--iterations", "10", "--num_random_points", "200", "--quiet"]
+
+
+def test_train_py_gives_the_selectors_the_camera_geometry(tiny_scene, tmp_path):
+    r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(tmp_path / "c"), "--method", "coverage", *ACTIVE)
+    assert r.returncode == 0, r.stderr
+    scene = Scene.load(str(tiny_scene), tmp_path / "x", white_background=False, resolution=1, eval=False)
+    centers = torch.stack([c.camera_center for c in scene.train_cameras]).double()
+    stages = json.loads((tmp_path / "c" / "selection.json").read_text())["stages"]
+    assert len(stages) == 2
+    for stage in stages:
+        pool = [v for v in range(len(centers)) if v not in stage["train_views"]]
+        assert stage["selected"] == fps_written_out(centers.tolist(), stage["train_views"], pool, 2)
+        assert stage["oracle_calls"] == {"conservative": 0, "evaluated": 0}
+    r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(tmp_path / "f"), "--method", "fisherrf", *ACTIVE)
+    assert r.returncode == 0, r.stderr
+    selection = json.loads((tmp_path / "f" / "selection.json").read_text())
+    assert selection["config"]["selector_options"] == {"fisherrf_lambda": 1e-6, "fisherrf_params":
+                                                       "means,log_scales,logit_opacities,sh_dc,sh_rest"}
+    for stage in selection["stages"]:
+        m = stage["candidates"]
+        assert stage["oracle_calls"]["conservative"] == stage["oracle_calls"]["evaluated"] == m + (m - 1)
+        assert stage["fisher_views_computed"] == m and all(g > 0 for g in stage["gains"])

@@ -1,0 +1,100 @@
+"""fisherrf: diagonals equal the block diagonals and a brute-force sum (dI/dtheta)^2; its picks and scores equal a
+greedy written out on brute-force diagonals; counts; the diagonal oracle through build_oracle; bad options."""
+import pytest
+import torch
+
+from active import build_selector
+from active.base import SelectionContext
+from active.fisher import (DiagonalGainOracle, build_oracle, fisher_view_blocks, fisher_view_diagonals,
+                           parameter_columns)
+from gaussian_renderer import rasterization
+from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
+from tests.test_fisher_oracle import BG, SETTINGS, W, H, cameras, tiny_model
+from utils.errors import UserError
+
+
+def bruteforce_diagonals(model, cam, sigma=1.0):
+    """sigma^-2 sum over pixels and channels of (dI/dtheta)^2 for every raw parameter, from the full autograd
+    Jacobian of the rendered image, in RAW_PARAMETER_GROUPS order. [N, 3 + 4 + 3 + 1 + 3 + 9]"""
+    def image(means, quats, log_scales, logit_opacities, sh_dc, sh_rest):
+        return rasterization(means, quats, torch.exp(log_scales), torch.sigmoid(logit_opacities),
+                             torch.cat([sh_dc, sh_rest], dim=1), cam.viewmat, cam.intrinsics, W, H, sh_degree=1,
+                             background=BG, settings=SETTINGS).image
+
+    jac = torch.autograd.functional.jacobian(image, tuple(model.params[k].detach() for k in RAW_PARAMETER_GROUPS))
+    n = model.num_gaussians
+    widths = [model.params[k][0].numel() for k in RAW_PARAMETER_GROUPS]
+    j = torch.cat([part.reshape(-1, n, w) for part, w in zip(jac, widths)], dim=2)  # [pixels x channels, N, P]
+    return (j ** 2).sum(0) / sigma**2
+
+
+def test_diagonals_equal_bruteforce_and_the_block_diagonals():
+    model, cam = tiny_model(seed=1), cameras()[2]
+    expected = bruteforce_diagonals(model, cam, sigma=0.5)
+    diag = fisher_view_diagonals(model, cam, BG, SETTINGS, sigma=0.5)
+    assert diag.shape == (6, 3 + 4 + 3 + 1 + 3 + 9) and expected[:, 14:].abs().max() > 1e-4  # sh_rest matters
+    torch.testing.assert_close(diag, expected, rtol=1e-4, atol=1e-4 * expected.abs().max().item())
+    blocks = fisher_view_blocks(model, cam, BG, SETTINGS, sigma=0.5, param_groups=RAW_PARAMETER_GROUPS)
+    torch.testing.assert_close(diag, torch.diagonal(blocks, dim1=-2, dim2=-1), rtol=1e-10, atol=1e-12)
+    cols = parameter_columns(model, RAW_PARAMETER_GROUPS)
+    assert cols["quats"] == slice(3, 7) and cols["sh_rest"] == slice(14, 23)
+
+
+def greedy_reference(diags, train, candidates, k, keep, lam):
+    """FisherRF's greedy written out: score sum h_c / (h + lam) over the kept columns, h += h_pick."""
+    h = sum(diags[v] for v in train)
+    ids, scores = [], []
+    for _ in range(k):
+        rest = [v for v in candidates if v not in ids]
+        values = [float((diags[v][:, keep] / (h[:, keep] + lam)).sum()) for v in rest]
+        best = max(range(len(rest)), key=lambda i: (values[i], -rest[i]))
+        ids.append(rest[best])
+        scores.append(values[best])
+        h = h + diags[rest[best]]
+    return ids, scores
+
+
+@pytest.mark.parametrize("mode", ["cached", "streaming"])
+@pytest.mark.parametrize("params,lam", [("means,log_scales,logit_opacities,sh_dc,sh_rest", 1e-6),
+                                        ("quats,sh_dc", 1e-2)])
+def test_selection_equals_greedy_on_bruteforce_diagonals(mode, params, lam):
+    model, cams = tiny_model(seed=2), cameras()
+    diags = [bruteforce_diagonals(model, cam) for cam in cams]
+    cols = parameter_columns(model, RAW_PARAMETER_GROUPS)
+    keep = torch.cat([torch.arange(cols[g].start, cols[g].stop) for g in params.split(",")])
+    ids, scores = greedy_reference(diags, [0, 3], [1, 2, 4, 5], 3, keep, lam)
+    oracle = build_oracle("diagonal", model, cams, [0, 3], BG, SETTINGS, mode=mode)
+    ctx = SelectionContext([5, 1, 4, 2], oracle, torch.Generator().manual_seed(0), 0)
+    sel = build_selector("fisherrf", fisherrf_lambda=lam, fisherrf_params=params).select(ctx, 3)
+    assert sel.ids == ids
+    torch.testing.assert_close(torch.tensor(sel.gains), torch.tensor(scores), rtol=1e-4, atol=0.0)
+    assert oracle.evaluated == sel.conservative == 4 + 3 + 2 == build_selector("fisherrf").conservative_count(4, 3)
+    assert oracle.views_computed == 4 and oracle.fisher_seconds > 0
+    torch.testing.assert_close(oracle.information, sum(diags[v] for v in [0, 3] + ids), rtol=1e-4,
+                               atol=1e-4 * float(oracle.information.abs().max()))
+
+
+def test_rotation_is_left_out_by_default_and_ties_go_to_the_lowest_id():
+    diag = torch.zeros(2, 4, dtype=torch.float64)
+    diag[:, 1] = 5.0  # only the "quats" column differs between views: the default ignores it
+    views = {7: diag, 3: torch.zeros_like(diag), 9: torch.zeros_like(diag)}
+    oracle = DiagonalGainOracle(torch.zeros(2, 4), lambda v: views[v],
+                                {"means": slice(0, 1), "quats": slice(1, 2), "log_scales": slice(2, 3),
+                                 "logit_opacities": slice(3, 4), "sh_dc": slice(4, 4), "sh_rest": slice(4, 4)})
+    sel = build_selector("fisherrf").select(SelectionContext([9, 7, 3], oracle, torch.Generator(), 0), 2)
+    assert sel.ids == [3, 7] and sel.gains == [0.0, 0.0] and sel.conservative == 3 + 2
+    sel = build_selector("fisherrf", fisherrf_params="quats").select(
+        SelectionContext([9, 7, 3], DiagonalGainOracle(torch.zeros(2, 4), lambda v: views[v], oracle.columns),
+                         torch.Generator(), 0), 1)
+    assert sel.ids == [7] and sel.gains == [pytest.approx(2 * 5.0 / 1e-6)]
+
+
+@pytest.mark.parametrize("options,needle", [({"fisherrf_lambda": 0.0}, "--fisherrf_lambda must be positive"),
+                                            ({"fisherrf_lambda": -1e-3}, "--fisherrf_lambda must be positive"),
+                                            ({"fisherrf_params": "means,rotation"}, "unknown: rotation"),
+                                            ({"fisherrf_params": ""}, "--fisherrf_params"),
+                                            ({"fisherrf_params": "means,means"}, "--fisherrf_params")])
+def test_bad_options_are_one_line(options, needle):
+    with pytest.raises(UserError, match=needle) as err:
+        build_selector("fisherrf", **options)
+    assert "\n" not in str(err.value)

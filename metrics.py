@@ -4,8 +4,11 @@
 
 Writes `results.json` ({"ours_N": {"SSIM", "PSNR", "LPIPS", "LPIPS_variant"}}) and `per_view.json`
 ({"ours_N": {"SSIM": {"00000.png": ...}, "PSNR": {...}, "LPIPS": {...}}}) into each model directory and prints a
-table. LPIPS weights: --lpips_weights, else $LITEGS_LPIPS_WEIGHTS, else the repository's weights/lpips_squeeze.pt,
-else torchvision's backbone if already in the torch hub cache; nothing is downloaded. Without weights LPIPS is null.
+table. When `render.py --uncertainty` wrote maps (test/ours_N/uncertainty/*.npy), both files also get "Spearman"
+(rank correlation of per-pixel uncertainty and absolute error) and "AUSE" (RMSE sparsification, see
+utils/uncertainty_metrics.py), per view and mean. LPIPS weights: --lpips_weights, else $LITEGS_LPIPS_WEIGHTS, else
+the repository's weights/lpips_squeeze.pt, else torchvision's backbone if already in the torch hub cache; nothing is
+downloaded. Without weights LPIPS is null.
 """
 from __future__ import annotations
 
@@ -54,15 +57,21 @@ def evaluate(model_dirs: list[str | os.PathLike], lpips_weights: str | os.PathLi
 
 def format_table(summary: dict[str, dict]) -> str:
     """A text table: model dir, method, #views, PSNR, SSIM, LPIPS (variant), from `evaluate`'s return value."""
-    rows = [("model", "method", "views", "PSNR", "SSIM", "LPIPS")]
+    with_uncertainty = any("AUSE" in r for results in summary.values() for r in results.values())
+    rows = [("model", "method", "views", "PSNR", "SSIM", "LPIPS") + (("Spearman", "AUSE") if with_uncertainty else ())]
     for model_dir, results in summary.items():
         for method, r in results.items():
             lp = f"{r['LPIPS']:.4f} ({r['LPIPS_variant']})" if r["LPIPS"] is not None else "unavailable"
-            rows.append((model_dir, method, str(r["num_views"]), f"{r['PSNR']:.2f}", f"{r['SSIM']:.4f}", lp))
+            extra = (_fmt(r.get("Spearman")), _fmt(r.get("AUSE"))) if with_uncertainty else ()
+            rows.append((model_dir, method, str(r["num_views"]), f"{r['PSNR']:.2f}", f"{r['SSIM']:.4f}", lp) + extra)
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines)
+
+
+def _fmt(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4f}"
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -10,7 +10,9 @@ from pathlib import Path
 import pytest
 from PIL import Image
 
+from scene.gaussian_model import GaussianModel
 from tests.conftest import ROOT, run_cli
+from tests.scenes import random_gaussians
 
 TRAIN_FAST = ["--iterations", "5", "--num_random_points", "200", "--quiet"]
 ACTIVE = ["--method", "lite_gs", "--num_init_views", "2", "--views_per_step", "2", "--max_views", "6",
@@ -115,6 +117,28 @@ def setup_corrupt_ply(tiny_scene, tmp):
     (model / "cfg_args").write_text(json.dumps({"model": {"source_path": str(tiny_scene), "eval": True},
                                                 "pipeline": {}}))
     return ["render.py", "-m", str(model), "--quiet"], "cannot read PLY"
+
+
+def setup_fisherrf_lambda(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--method", "fisherrf",
+            "--fisherrf_lambda", "0"], "--fisherrf_lambda must be positive"
+
+
+def setup_fisherrf_params(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--method", "fisherrf",
+            "--fisherrf_params", "means,rotation"], "unknown: rotation"
+
+
+def setup_uncertainty_without_views(tiny_scene, tmp):
+    model = tmp / "m"  # an active run's model without selection.json
+    (model / "point_cloud" / "iteration_5").mkdir(parents=True)
+    p = random_gaussians(4, seed=0, sh_degree=0)
+    GaussianModel(0, {"means": p["means"], "quats": p["quats"], "log_scales": p["log_scales"],
+                      "logit_opacities": p["logit_opacities"], "sh_dc": p["sh_coeffs"][:, :1],
+                      "sh_rest": p["sh_coeffs"][:, 1:]}).save_ply(model / "point_cloud" / "iteration_5" / "point_cloud.ply")
+    (model / "cfg_args").write_text(json.dumps({"model": {"source_path": str(tiny_scene), "eval": True},
+                                                "pipeline": {}, "active": {"method": "lite_gs"}}))
+    return ["render.py", "-m", str(model), "--uncertainty", "--quiet"], "no training views recorded"
 
 
 def setup_metrics_no_renders(tiny_scene, tmp):

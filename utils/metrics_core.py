@@ -11,6 +11,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 from tqdm import tqdm
 
@@ -18,6 +19,7 @@ from utils.errors import UserError
 from utils.image import load_rgba
 from utils.losses import psnr, ssim
 from utils.lpips_loader import LPIPS_MIN_SIDE, lpips_distance
+from utils.uncertainty_metrics import ause, spearman
 
 log = logging.getLogger(__name__)
 
@@ -82,14 +84,20 @@ class Lpips:
 @torch.no_grad()
 def evaluate_views(method_dir: Path, lpips: Lpips | None, device: str | torch.device = "cpu",
                    quiet: bool = False) -> dict[str, dict[str, float | None]]:
-    """Per-view metrics of one `test/ours_N` directory: {"SSIM": {name: v}, "PSNR": {...}, "LPIPS": {...}}.
+    """Per-view metrics of one `test/ours_N` directory: {"SSIM": {name: v}, "PSNR": {...}, "LPIPS": {...}}, plus
+    "Spearman" and "AUSE" (uncertainty vs per-pixel error, `uncertainty_scores`) when render.py --uncertainty wrote
+    `uncertainty/*.npy`.
 
     LPIPS values are None without a network, or for images smaller than its backbone accepts (logged once).
 
     Raises:
-        UserError: renders/ and gt/ differ in file names or in the size of an image.
+        UserError: renders/ and gt/ differ in file names or in the size of an image; an uncertainty map is missing
+            or of another size.
     """
     per_view: dict[str, dict[str, float | None]] = {"SSIM": {}, "PSNR": {}, "LPIPS": {}}
+    with_uncertainty = (method_dir / "uncertainty").is_dir()
+    if with_uncertainty:
+        per_view.update({"Spearman": {}, "AUSE": {}})
     too_small = False
     names = view_names(method_dir)
     label = f"{method_dir.parent.parent.name}/{method_dir.name}"
@@ -104,19 +112,43 @@ def evaluate_views(method_dir: Path, lpips: Lpips | None, device: str | torch.de
         distance = lpips_distance(lpips.model, lpips.variant, render, gt) if lpips is not None else None
         too_small |= lpips is not None and distance is None
         per_view["LPIPS"][name] = None if distance is None else distance.item()
+        if with_uncertainty:
+            per_view["Spearman"][name], per_view["AUSE"][name] = uncertainty_scores(method_dir, name, render, gt)
     if too_small:
         log.warning("%s: LPIPS null for images under %d px (the smallest side LPIPS-%s accepts)", label,
                     LPIPS_MIN_SIDE[lpips.variant], lpips.variant)
     return per_view
 
 
+def uncertainty_scores(method_dir: Path, name: str, render: torch.Tensor,
+                       gt: torch.Tensor) -> tuple[float | None, float]:
+    """(Spearman, AUSE) of `uncertainty/<stem>.npy` against the per-pixel absolute error, averaged over RGB.
+
+    Raises:
+        UserError: the map is missing or not the size of the image.
+    """
+    path = method_dir / "uncertainty" / (Path(name).stem + ".npy")
+    if not path.is_file():
+        raise UserError(f"{method_dir}: uncertainty/ has no {path.name}; rerun render.py --uncertainty for this model")
+    values = np.load(path)  # [H, W]
+    errors = (render - gt).abs().mean(0).cpu().numpy()  # [H, W]
+    if values.shape != errors.shape:
+        raise UserError(f"{method_dir}: uncertainty/{path.name} is {values.shape[1]}x{values.shape[0]} but "
+                        f"renders/{name} is {errors.shape[1]}x{errors.shape[0]}; rerun render.py --uncertainty")
+    return spearman(values, errors), ause(values, errors)
+
+
 def mean_metrics(per_view: dict[str, dict[str, float | None]], lpips_variant: str | None) -> dict:
-    """One `results.json` entry: {"SSIM", "PSNR", "LPIPS", "LPIPS_variant"}; LPIPS (and its variant) is None unless
-    every view has a value."""
+    """One `results.json` entry: {"SSIM", "PSNR", "LPIPS", "LPIPS_variant"}, plus "Spearman" and "AUSE" when the
+    views have uncertainty maps; LPIPS (and its variant) is None unless every view has a value, and so is Spearman
+    unless every view's is defined."""
     def mean(values: dict[str, float | None]) -> float | None:
         vals = list(values.values())
         return math.fsum(vals) / len(vals) if vals and None not in vals else None
 
     lpips_mean = mean(per_view["LPIPS"])
-    return {"SSIM": mean(per_view["SSIM"]), "PSNR": mean(per_view["PSNR"]), "LPIPS": lpips_mean,
-            "LPIPS_variant": lpips_variant if lpips_mean is not None else None}
+    result = {"SSIM": mean(per_view["SSIM"]), "PSNR": mean(per_view["PSNR"]), "LPIPS": lpips_mean,
+              "LPIPS_variant": lpips_variant if lpips_mean is not None else None}
+    if "Spearman" in per_view:
+        result.update({"Spearman": mean(per_view["Spearman"]), "AUSE": mean(per_view["AUSE"])})
+    return result

@@ -1,0 +1,78 @@
+"""Per-Gaussian and per-pixel uncertainty from the Fisher information of the training views.
+
+Per Gaussian i, with A_i = H_train,i + delta_i I its prior block (the training views' Fisher blocks over the run's
+`--fisher_params`, plus the oracle's ridge delta_i = delta_rel max diag + delta_abs, `active.logdet.BlockInformation`):
+
+    u_i = trace([A_i^-1]_means),
+
+the trace of the 3 x 3 positional block of the inverse: the marginal posterior variance of the mean under the
+Laplace approximation, in world units^2 x sigma^2 (the other parameters are marginalised, not held fixed). A Gaussian
+no training view sees has only the ridge: u_i = 3 / delta_abs.
+
+Per pixel, u_i is alpha-composited like a colour (render with `override_color`, black background): the map is
+sum_i w_i u_i with w_i the blending weights, 0 where nothing is drawn.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+
+from active.fisher import FISHER_PARAM_GROUPS, fisher_view_blocks, parameter_columns
+from active.logdet import BlockInformation
+from gaussian_renderer import RasterSettings, render
+from scene.cameras import Camera
+from scene.gaussian_model import GaussianModel
+from utils.errors import UserError
+
+
+def gaussian_uncertainty(gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
+                         background: torch.Tensor, settings: RasterSettings, *, sigma: float = 1.0,
+                         delta_rel: float = 1e-6, delta_abs: float = 1e-8, param_groups: str = "default") -> torch.Tensor:
+    """u_i = trace of the means block of (H_train,i + delta_i I)^-1 for every Gaussian. [N] float64"""
+    groups = FISHER_PARAM_GROUPS[param_groups]
+    prior = None
+    for v in train_views:
+        blocks = fisher_view_blocks(gaussians, cameras[v], background, settings, sigma, groups)
+        prior = blocks if prior is None else prior.add_(blocks)
+    information = BlockInformation(prior, delta_rel=delta_rel, delta_abs=delta_abs)
+    covariance = torch.cholesky_inverse(information.chol)  # A^-1 [N, P, P]
+    means = parameter_columns(gaussians, groups)["means"]
+    return torch.diagonal(covariance[:, means, means], dim1=-2, dim2=-1).sum(-1)
+
+
+@torch.no_grad()
+def uncertainty_map(camera: Camera, gaussians: GaussianModel, uncertainty: torch.Tensor,
+                    settings: RasterSettings) -> torch.Tensor:
+    """sum_i w_i u_i per pixel: `uncertainty` [N] rendered as a grey override colour on black. [H, W] float32"""
+    colors = uncertainty.to(gaussians.means.dtype)[:, None].expand(-1, 3).contiguous()  # [N, 3]
+    background = torch.zeros(3, dtype=gaussians.means.dtype, device=gaussians.means.device)
+    return render(camera, gaussians, background, settings, override_color=colors).image[0].float()
+
+
+def recorded_train_views(model_path: Path, iteration: int, num_train: int, method: str) -> list[int]:
+    """The training views of the model saved at `iteration`: from selection.json for an active run (the set of the
+    stage that iteration belongs to), all `num_train` training cameras for a run without --method (`method` "").
+
+    Raises:
+        UserError: an active run without a readable selection.json, or a run with no training cameras.
+    """
+    if not method:
+        if num_train == 0:
+            raise UserError(f"{model_path}: the scene has no training cameras, so no training views to take the "
+                            "uncertainty from")
+        return list(range(num_train))
+    path = model_path / "selection.json"
+    try:
+        selection = json.loads(path.read_text())
+        stages, final = selection["stages"], selection.get("final")
+        for stage in stages:  # the training set before acquisition s trained up to stage s's iteration
+            if iteration <= stage["iteration"]:
+                return list(stage["train_views"])
+        if final is not None:
+            return list(final["train_views"])
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    raise UserError(f"{model_path}: no training views recorded for iteration {iteration} (selection.json missing, "
+                    "unfinished or malformed); --uncertainty needs a finished train.py run")

@@ -95,3 +95,6 @@ def test_render_uncertainty_then_metrics(tiny_scene, tmp_path):
     assert -1 <= results["Spearman"] <= 1 and results["AUSE"] >= 0
     assert results["AUSE"] == pytest.approx(sum(per_view["AUSE"].values()) / 4)
     assert "Spearman" in r.stdout
+    r = run_cli("scripts/uncertainty_figure.py", str(model), "--view", "2", "--out", str(tmp_path / "fig.png"))
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "fig.png").stat().st_size > 0

@@ -58,7 +58,8 @@ def evaluate(model_dirs: list[str | os.PathLike], lpips_weights: str | os.PathLi
 def format_table(summary: dict[str, dict]) -> str:
     """A text table: model dir, method, #views, PSNR, SSIM, LPIPS (variant), from `evaluate`'s return value."""
     with_uncertainty = any("AUSE" in r for results in summary.values() for r in results.values())
-    rows = [("model", "method", "views", "PSNR", "SSIM", "LPIPS") + (("Spearman", "AUSE") if with_uncertainty else ())]
+    header = ("model", "method", "views", "PSNR", "SSIM", "LPIPS")
+    rows = [header + (("Spearman", "AUSE") if with_uncertainty else ())]
     for model_dir, results in summary.items():
         for method, r in results.items():
             lp = f"{r['LPIPS']:.4f} ({r['LPIPS_variant']})" if r["LPIPS"] is not None else "unavailable"

@@ -29,7 +29,8 @@ from utils.errors import UserError
 
 def gaussian_uncertainty(gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
                          background: torch.Tensor, settings: RasterSettings, *, sigma: float = 1.0,
-                         delta_rel: float = 1e-6, delta_abs: float = 1e-8, param_groups: str = "default") -> torch.Tensor:
+                         delta_rel: float = 1e-6, delta_abs: float = 1e-8,
+                         param_groups: str = "default") -> torch.Tensor:
     """u_i = trace of the means block of (H_train,i + delta_i I)^-1 for every Gaussian. [N] float64"""
     groups = FISHER_PARAM_GROUPS[param_groups]
     prior = None

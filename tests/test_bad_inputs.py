@@ -133,9 +133,10 @@ def setup_uncertainty_without_views(tiny_scene, tmp):
     model = tmp / "m"  # an active run's model without selection.json
     (model / "point_cloud" / "iteration_5").mkdir(parents=True)
     p = random_gaussians(4, seed=0, sh_degree=0)
-    GaussianModel(0, {"means": p["means"], "quats": p["quats"], "log_scales": p["log_scales"],
-                      "logit_opacities": p["logit_opacities"], "sh_dc": p["sh_coeffs"][:, :1],
-                      "sh_rest": p["sh_coeffs"][:, 1:]}).save_ply(model / "point_cloud" / "iteration_5" / "point_cloud.ply")
+    gaussians = GaussianModel(0, {"means": p["means"], "quats": p["quats"], "log_scales": p["log_scales"],
+                                  "logit_opacities": p["logit_opacities"], "sh_dc": p["sh_coeffs"][:, :1],
+                                  "sh_rest": p["sh_coeffs"][:, 1:]})
+    gaussians.save_ply(model / "point_cloud" / "iteration_5" / "point_cloud.ply")
     (model / "cfg_args").write_text(json.dumps({"model": {"source_path": str(tiny_scene), "eval": True},
                                                 "pipeline": {}, "active": {"method": "lite_gs"}}))
     return ["render.py", "-m", str(model), "--uncertainty", "--quiet"], "no training views recorded"

@@ -61,7 +61,8 @@ def test_directions_ignore_the_distance():
     target = torch.tensor((0.2, -0.1, 0.3), dtype=torch.float64)
     viewmats = torch.stack([look_at_viewmat(e, tuple(target.tolist())) for e in eyes()])
     centers = camera_centers(viewmats)
-    centers = torch.cat([centers, (target + 3.0 * (centers[0] - target))[None]])  # view 6: view 0's direction, 3x as far
+    far = target + 3.0 * (centers[0] - target)  # view 6: view 0's direction, 3x as far
+    centers = torch.cat([centers, far[None]])
     ctx = SelectionContext([2, 3, 4, 5, 6], None, torch.Generator(), 0, train_ids=(0, 1), camera_centers=centers,
                            scene_center=target)
     units = (centers - target) / (centers - target).norm(dim=-1, keepdim=True)

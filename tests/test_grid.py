@@ -102,7 +102,8 @@ def test_slurm_dry_run_writes_the_sbatch_file(tmp_path):
 @pytest.mark.parametrize("args, expect", [
     (["--setup", "setup9"], "setup1, setup2, setup3, setup4, ablation_ssg"),
     (["--setup", "setup1", "--scenes", "lego", "chair"], "scenes in"),
-    (["--setup", "setup1", "--methods", "pop_gs", "fisherrf"], "registered selectors: lite_gs, pop_gs, random, ssg"),
+    (["--setup", "setup1", "--methods", "pop_gs", "no_such"],
+     "registered selectors: coverage, fisherrf, lite_gs, pop_gs, random, ssg"),
     (["--setup", "setup1", "--max_parallel", "0"], "--max_parallel must be an integer >= 1"),
     (["--setup", "setup1", "--seeds", "0"], "--seeds"),
     (["--setup", "setup1", "--eps", "1"], "--eps"),
@@ -123,7 +124,7 @@ def test_bad_input_is_a_user_error(tmp_path, monkeypatch, args, expect):
 
 def test_bad_input_cli_is_one_error_line(tmp_path):
     env, python, data, log = make_fake(tmp_path)
-    r = grid("--setup", "setup1", "--data", str(data), "--methods", "fisherrf", "--python", str(python), env=env)
+    r = grid("--setup", "setup1", "--data", str(data), "--methods", "no_such", "--python", str(python), env=env)
     assert r.returncode == 2 and r.stdout == "" and r.stderr.count("\n") == 1 and r.stderr.startswith("error: ")
     assert not log.exists()
 

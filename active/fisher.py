@@ -175,22 +175,27 @@ class FisherViewBlocks:
         return blocks
 
 
-class FisherOracle(BlockGainOracle):
+class _ViewStatistics:
+    """What an oracle reports of its `FisherViewBlocks` (`self.blocks`): distinct candidate views computed and the
+    seconds spent computing blocks or diagonals, the prior included."""
+
+    blocks: "FisherViewBlocks"
+
+    @property
+    def views_computed(self) -> int:
+        return self.blocks.views_computed
+
+    @property
+    def fisher_seconds(self) -> float:
+        return self.blocks.fisher_seconds
+
+
+class FisherOracle(_ViewStatistics, BlockGainOracle):
     """The counted Fisher gain oracle of one acquisition step: prior of the training views, blocks of the others."""
 
     def __init__(self, information: BlockInformation, view_blocks: FisherViewBlocks):
         super().__init__(information, view_blocks)
         self.blocks = view_blocks
-
-    @property
-    def views_computed(self) -> int:
-        """Distinct candidate views whose blocks were computed."""
-        return self.blocks.views_computed
-
-    @property
-    def fisher_seconds(self) -> float:
-        """Seconds spent computing Fisher blocks, the prior included."""
-        return self.blocks.fisher_seconds
 
     @classmethod
     def build(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int], background: torch.Tensor,
@@ -228,23 +233,13 @@ class DiagonalGainOracle:
         self.evaluated = 0
 
 
-class DiagonalFisherOracle(DiagonalGainOracle):
+class DiagonalFisherOracle(_ViewStatistics, DiagonalGainOracle):
     """The counted diagonal Fisher oracle of one acquisition step, over every raw parameter group of the model."""
 
     def __init__(self, information: torch.Tensor, view_diagonals: FisherViewBlocks):
         super().__init__(information, view_diagonals,
                          parameter_columns(view_diagonals.gaussians, view_diagonals.param_groups))
         self.blocks = view_diagonals
-
-    @property
-    def views_computed(self) -> int:
-        """Distinct candidate views whose diagonals were computed."""
-        return self.blocks.views_computed
-
-    @property
-    def fisher_seconds(self) -> float:
-        """Seconds spent computing diagonals, the prior included."""
-        return self.blocks.fisher_seconds
 
     @classmethod
     def build(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int], background: torch.Tensor,

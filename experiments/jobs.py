@@ -39,11 +39,19 @@ def trained_iteration(model_dir: Path) -> int | None:
     return None
 
 
-def is_finished(model_dir: Path) -> bool:
-    """Trained, rendered and scored: results.json holds the final iteration's entry."""
+def is_finished(model_dir: Path, uncertainty: bool = False) -> bool:
+    """Trained, rendered and scored: results.json holds the final iteration's entry (with `uncertainty`, one that
+    carries the uncertainty metrics)."""
     iteration = trained_iteration(model_dir)
     results = _read_json(model_dir / "results.json")
-    return iteration is not None and isinstance(results, dict) and f"ours_{iteration}" in results
+    entry = results.get(f"ours_{iteration}") if iteration is not None and isinstance(results, dict) else None
+    return isinstance(entry, dict) and (not uncertainty or "AUSE" in entry)
+
+
+def is_rendered(model_dir: Path, iteration: int, uncertainty: bool = False) -> bool:
+    """The test views of `iteration` are rendered (with `uncertainty`, their uncertainty maps too)."""
+    rendered = model_dir / "test" / f"ours_{iteration}"
+    return (rendered / "renders").is_dir() and (not uncertainty or (rendered / "uncertainty").is_dir())
 
 
 def is_started(model_dir: Path) -> bool:
@@ -70,6 +78,7 @@ class JobSpec:
     train_args: tuple[str, ...]  # train.py flags without --device
     device: str  # auto | cpu | cuda (auto: cuda when the job's machine has one)
     threads: int  # OMP/MKL/numba threads of each CLI process
+    uncertainty: bool = False  # render.py --uncertainty: maps, and Spearman/AUSE in results.json
 
     @property
     def lock_path(self) -> Path:
@@ -78,8 +87,9 @@ class JobSpec:
     def commands(self, device: str) -> list[tuple[str, list[str]]]:
         """(step, argv) of train, render and metrics."""
         root = Path(self.root)
+        render = [self.python, str(root / "render.py"), "-m", self.model_dir, "--skip_train", "--quiet"]
         return [("train", [self.python, str(root / "train.py"), *self.train_args, "--device", device]),
-                ("render", [self.python, str(root / "render.py"), "-m", self.model_dir, "--skip_train", "--quiet"]),
+                ("render", render + (["--uncertainty"] if self.uncertainty else [])),
                 ("metrics", [self.python, str(root / "metrics.py"), "-m", self.model_dir, "--quiet"])]
 
 
@@ -115,7 +125,7 @@ class GridJob(Checkpointable):
     def _steps(self, logf, lock_fd: int) -> dict[str, Any]:
         spec, model = self.spec, Path(self.spec.model_dir)
         fresh = False
-        if is_finished(model):
+        if is_finished(model, spec.uncertainty):
             self._note(logf, "already finished")
             return {"state": "done", "error": "", "fresh": False}
         env = {**os.environ, **{var: str(spec.threads) for var in THREAD_VARS}}
@@ -123,7 +133,7 @@ class GridJob(Checkpointable):
             iteration = trained_iteration(model)
             if step == "train" and iteration is not None:
                 continue
-            if step == "render" and (model / "test" / f"ours_{iteration}" / "renders").is_dir():
+            if step == "render" and is_rendered(model, iteration, spec.uncertainty):
                 continue
             if step == "train":
                 fresh = not is_started(model)

@@ -62,6 +62,7 @@ class GridConfig:
     python: str  # interpreter of the jobs' CLI calls
     slurm: SlurmOptions = field(default_factory=SlurmOptions)
     dry_run: bool = False
+    uncertainty: bool = False  # render.py --uncertainty in every job
 
     @property
     def setup_dir(self) -> Path:
@@ -83,7 +84,7 @@ def job_spec(cfg: GridConfig, run: RunSpec) -> JobSpec:
     train_args += run.schedule_args(PROTOCOLS[cfg.setup], cfg.scale) + ["--quiet", *cfg.extra_args]
     return JobSpec(key=run.key, model_dir=str(model), log_path=str(cfg.setup_dir / "logs" / f"{run.key}.log"),
                    python=cfg.python, root=str(ROOT), train_args=tuple(train_args), device=cfg.device,
-                   threads=cfg.threads)
+                   threads=cfg.threads, uncertainty=cfg.uncertainty)
 
 
 def train_command(spec: JobSpec) -> str:
@@ -172,7 +173,7 @@ class Tracker:
                        "threads_per_job": cfg.threads, "started": time.strftime("%Y-%m-%d %H:%M:%S")}
         self.jobs: dict[str, dict[str, Any]] = {}
         for spec in specs:
-            done = is_finished(Path(spec.model_dir))
+            done = is_finished(Path(spec.model_dir), spec.uncertainty)
             self.jobs[spec.key] = {"key": spec.key, "state": "skipped" if done else "pending",
                                    "model_dir": spec.model_dir, "command": train_command(spec),
                                    "log": spec.log_path, "error": "", "seconds": None}
@@ -298,7 +299,7 @@ def run_grid(cfg: GridConfig) -> int:
     """Run (or resume) every job of the grid, then summarize; returns the number of failed jobs."""
     specs = [job_spec(cfg, run) for run in cfg.runs]
     check_flags(cfg, specs)
-    todo = [s for s in specs if not is_finished(Path(s.model_dir))]
+    todo = [s for s in specs if not is_finished(Path(s.model_dir), s.uncertainty)]
     # Jobs an earlier (killed) runner's workers still hold go first: they take a slot while they wait for them.
     todo.sort(key=lambda s: not lock_held(s))
     if cfg.dry_run:

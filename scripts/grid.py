@@ -64,6 +64,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "job stops at its last stage checkpoint and is requeued (default 1440)")
     p.add_argument("--python", default=sys.executable, help="interpreter for train.py/render.py/metrics.py "
                    "(default: this one)")
+    p.add_argument("--uncertainty", action="store_true",
+                   help="render the uncertainty maps too (render.py --uncertainty); results.json and the summary "
+                        "then carry Spearman and AUSE (a rerun with it adds them to finished runs)")
     p.add_argument("--dry_run", action="store_true", help="print the jobs (slurm: also write the sbatch file) "
                    "without running anything")
     return p
@@ -164,7 +167,7 @@ def parse(argv: list[str]) -> GridConfig:
     cfg = GridConfig(setup=args.setup, data=data, out=out, runs=tuple(runs), scale=scale, device=device,
                      extra_args=tuple(extra), launcher=args.launcher, max_parallel=max_parallel, threads=threads,
                      python=str(Path(args.python).absolute()) if os.sep in args.python else args.python,
-                     slurm=slurm, dry_run=args.dry_run)
+                     slurm=slurm, dry_run=args.dry_run, uncertainty=args.uncertainty)
     return cfg
 
 

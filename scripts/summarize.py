@@ -140,7 +140,11 @@ def per_step_count(runs: list[Run], kind: str) -> int | None:
 
 
 def quality_rows(runs: list[Run]) -> list[dict]:
-    """Setup x method setting: PSNR / SSIM / LPIPS mean and std over the complete runs (seeds and scenes)."""
+    """Setup x method setting: PSNR / SSIM / LPIPS mean and std over the complete runs (seeds and scenes), and the
+    uncertainty metrics (Spearman, AUSE) when some run has them (render.py --uncertainty)."""
+    metrics = ("PSNR", "SSIM", "LPIPS")
+    if any(r.results is not None and "AUSE" in r.results for r in runs):
+        metrics += ("Spearman", "AUSE")
     groups: dict[tuple, list[Run]] = defaultdict(list)
     for r in runs:
         groups[(r.setup, r.setting)].append(r)
@@ -149,7 +153,7 @@ def quality_rows(runs: list[Run]) -> list[dict]:
         done = [r.results for r in group if r.results is not None]
         row = {"setup": setup, "method": setting, "scenes": " ".join(sorted({r.scene for r in group})),
                "runs": len(done), "incomplete": len(group) - len(done)}
-        for metric in ("PSNR", "SSIM", "LPIPS"):
+        for metric in metrics:
             values = [float(d[metric]) for d in done if isinstance(d.get(metric), (int, float))]
             row[f"{metric}_mean"], row[f"{metric}_std"] = mean_std(values)
         row["LPIPS_variant"] = next((d["LPIPS_variant"] for d in done
@@ -234,7 +238,7 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
 
     out.mkdir(parents=True, exist_ok=True)
     quality, oracles, times = quality_rows(runs), oracle_rows(runs), time_rows(runs)
-    digits = {"PSNR": 2, "SSIM": 4, "LPIPS": 4, "select": 1, "fisher": 1, "reduction": 2}
+    digits = {"PSNR": 2, "SSIM": 4, "LPIPS": 4, "Spearman": 3, "AUSE": 4, "select": 1, "fisher": 1, "reduction": 2}
     incomplete = [r for r in runs if r.results is None]
     md = ["# Summary", "",
           f"{len(runs)} runs ({len(incomplete)} incomplete) from {len({r.setup for r in runs})} setup(s). "

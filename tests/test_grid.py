@@ -181,6 +181,30 @@ def test_skip_resume_failure_and_flag_mismatch(tmp_path):
     assert not log.exists()
 
 
+def test_uncertainty_rerun_adds_the_maps_to_finished_runs(tmp_path):
+    """--uncertainty renders with render.py --uncertainty; on a finished grid it re-renders and re-scores each run
+    (no training), and the summary gains the Spearman and AUSE columns."""
+    env, python, data, log = make_fake(tmp_path)
+    out = tmp_path / "out"
+    args = ["--setup", "setup1", "--data", str(data), "--scenes", "ship", "--methods", "random", "--seeds", "2",
+            "--out", str(out), "--python", str(python), "--iter_scale", "0.01", "--launcher", "inline"]
+    r = grid(*args, env=env)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert all("--uncertainty" not in c for c in calls(log, "render.py"))
+    assert "AUSE" not in (out / "setup1" / "summary.md").read_text()
+    log.unlink()
+    r = grid(*args, "--uncertainty", env=env)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "2 to run" in r.stdout and not calls(log, "train.py")
+    renders = calls(log, "render.py")
+    assert len(renders) == 2 and all("--uncertainty" in c for c in renders) and len(calls(log, "metrics.py")) == 2
+    summary = (out / "setup1" / "summary.md").read_text()
+    assert "| Spearman | AUSE | LPIPS_variant |" in summary and "| 0.500 ± 0.000 | 0.0150 ± 0.0071 |" in summary, summary
+    log.unlink()
+    r = grid(*args, "--uncertainty", env=env)  # now finished with the maps: nothing runs
+    assert r.returncode == 0 and "0 to run" in r.stdout and not log.exists(), r.stdout
+
+
 def test_runs_made_with_other_flags_are_refused(tmp_path):
     """A run directory from before the grid (no grid.json) whose cfg_args differ from what the grid would pass."""
     import train

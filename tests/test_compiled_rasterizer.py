@@ -1,5 +1,6 @@
 """Compiled (numba) rasterizer backend vs its torch twin and the dense reference; backend selection and bad input."""
 import logging
+import math
 
 import pytest
 import torch
@@ -40,6 +41,41 @@ CASES = {  # name: (scene factory, width, height, tile size)
     "early_stop_clamped": (lambda dt: stacked_scene(dtype=dt), 8, 8, 4),
     "empty_tiles": (lambda dt: corner_scene(dtype=dt), 40, 36, 4),
 }
+
+
+def test_pixel_box_holds_every_reachable_pixel_and_little_else():
+    """The in-tile pixel box of a pair against brute force over the tile: every pixel with power >= cut (the
+    kernels' reach test) lies inside it, and it is the ellipse's bounding box (half-widths sqrt(-2 cut) sigma from
+    the covariance) in pixels, give or take one (the rounding margin). Degenerate conics take the whole tile; cut > 0 (alpha_min out of reach) none of it."""
+    from gaussian_renderer.compiled.kernels import _pixel_box
+    box = _pixel_box.py_func
+    tile, rng = 16, torch.Generator().manual_seed(5)
+    centres = torch.arange(tile, dtype=torch.float64) + 0.5
+    px, py = centres[None, :].expand(tile, tile), centres[:, None].expand(tile, tile)
+    nonempty = 0
+    for _ in range(400):
+        mx, my = (torch.rand(2, generator=rng, dtype=torch.float64) * 40 - 12).tolist()
+        sx, sy = torch.exp(torch.rand(2, generator=rng, dtype=torch.float64) * 4 - 1.5).tolist()
+        rho = float(torch.rand(1, generator=rng, dtype=torch.float64)) * 1.9 - 0.95
+        det = (sx * sy) ** 2 * (1 - rho ** 2)
+        ca, cb, cc = sy ** 2 / det, -rho * sx * sy / det, sx ** 2 / det  # inverse of the 2x2 covariance
+        cut = float(torch.rand(1, generator=rng, dtype=torch.float64)) * -6
+        dx, dy = px - mx, py - my
+        power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
+        ys, xs = torch.nonzero(power >= cut, as_tuple=True)
+        x_lo, x_hi, y_lo, y_hi = box(mx, my, ca, cb, cc, cut, tile)
+        hx, hy = math.sqrt(-2 * cut) * sx, math.sqrt(-2 * cut) * sy
+        expect = (max(0, math.ceil(mx - hx - 0.5)), min(tile - 1, math.floor(mx + hx - 0.5)),
+                  max(0, math.ceil(my - hy - 0.5)), min(tile - 1, math.floor(my + hy - 0.5)))
+        assert all(abs(a - b) <= 1 for a, b in zip((x_lo, x_hi, y_lo, y_hi), expect)), ((x_lo, x_hi, y_lo, y_hi), expect)
+        if len(xs):
+            nonempty += 1
+            assert x_lo <= xs.min() and xs.max() <= x_hi and y_lo <= ys.min() and ys.max() <= y_hi
+    assert nonempty > 100
+    assert box(3.0, 3.0, 1.0, 2.0, 1.0, -2.0, tile) == (0, tile - 1, 0, tile - 1)  # not positive definite
+    assert box(3.0, 3.0, float("nan"), 0.0, 1.0, -2.0, tile) == (0, tile - 1, 0, tile - 1)
+    x_lo, x_hi, _, _ = box(3.0, 3.0, 1.0, 0.0, 1.0, 0.5, tile)
+    assert x_lo > x_hi
 
 
 def _render_all(backend, scene, width, height, tile, dtype):

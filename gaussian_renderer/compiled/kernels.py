@@ -3,7 +3,9 @@
 Each kernel runs in parallel over `num_slices` slices, one per thread (interleaved tiles; for binning, contiguous
 runs of the depth-sorted Gaussians), and works one pixel at a time, as the CUDA 3DGS kernel does: per tile it walks
 the tile's depth-sorted list and updates the tile's pixels, so nothing is padded and a tile stops as soon as all
-its pixels are finished. All arrays are float64 (one compiled specialisation; the wrappers in
+its pixels are finished. A kernel "tile" is a block of whole binning tiles (`ops.BLOCK_PIXELS`); a pair visits
+only the pixels of its reach box (`_pixel_box`: the ellipse where alpha >= alpha_min can hold) clipped to its
+tile rectangle (`rects`, pixels), so the block size changes the work, never the pixels a Gaussian touches. All arrays are float64 (one compiled specialisation; the wrappers in
 `gaussian_renderer.compiled.ops` convert), per-Gaussian sums go to one buffer per slice, added up at the end.
 
 Compositing rules (identical to `gaussian_renderer.rasterize`): a pair is skipped where power > 0 or
@@ -73,8 +75,45 @@ def _pixel_offsets(tile_size):
     return fx, fy, ix, iy
 
 
+BOX_MARGIN = 1e-6  # px added to the pixel box's half-widths, so rounding never drops a pixel the tests pass
+
+
+@njit(inline="always", cache=True)
+def _pixel_box(mx, my, ca, cb, cc, cut, tile_size):
+    """Pixels of a tile the pair can reach: (x_lo, x_hi, y_lo, y_hi), inclusive, in-tile pixel indices.
+
+    Where power = -q/2 >= cut, q = a dx^2 + 2 b dx dy + c dy^2 <= r2 = -2 cut: an ellipse whose axis-aligned box
+    has half-widths sqrt(r2 c / det), sqrt(r2 a / det) (det = a c - b^2). Outside it every pixel fails the
+    `power < cut` test, so skipping it changes nothing. Empty (x_lo > x_hi) when cut > 0; the whole tile when
+    the conic is not positive definite or a value is not finite."""
+    last = tile_size - 1
+    det = ca * cc - cb * cb
+    r2 = -2.0 * cut
+    if r2 < 0.0:
+        return 0, -1, 0, -1
+    if not (det > 0.0 and ca > 0.0 and cc > 0.0 and r2 <= 1e300 and abs(mx) < 1e15 and abs(my) < 1e15):
+        return 0, last, 0, last
+    hx = math.sqrt(r2 * cc / det) * (1.0 + BOX_MARGIN) + BOX_MARGIN
+    hy = math.sqrt(r2 * ca / det) * (1.0 + BOX_MARGIN) + BOX_MARGIN
+    # pixel i has its centre at i + 0.5: keep i with |i + 0.5 - m| <= h
+    x_lo = max(0, int(math.ceil(mx - hx - 0.5)))
+    x_hi = min(last, int(math.floor(mx + hx - 0.5)))
+    y_lo = max(0, int(math.ceil(my - hy - 0.5)))
+    y_hi = min(last, int(math.floor(my + hy - 0.5)))
+    return x_lo, x_hi, y_lo, y_hi
+
+
+@njit(inline="always", cache=True)
+def _pair_box(geom, rects, g, px0, py0, tile_size):
+    """`_pixel_box` of Gaussian g in the tile (block) at (px0, py0), clipped to the Gaussian's pixel rectangle."""
+    mx, my = geom[g, 0] - px0, geom[g, 1] - py0
+    x_lo, x_hi, y_lo, y_hi = _pixel_box(mx, my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 6], tile_size)
+    return (max(x_lo, rects[g, 0] - px0), min(x_hi, rects[g, 1] - px0), max(y_lo, rects[g, 2] - py0),
+            min(y_hi, rects[g, 3] - py0))
+
+
 @njit(parallel=True, cache=True)
-def forward(offsets, ids, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
+def forward(offsets, ids, rects, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
             trans_min, image, trans_out, last_out):
     """Front-to-back compositing. Writes image [D, H, W] (background included), trans_out [H, W] (final
     transmittance) and last_out [H, W] (int32, see the module docstring)."""
@@ -101,26 +140,28 @@ def forward(offsets, ids, geom, colors, background, width, height, tile_size, ti
             g = ids[k]
             mx, my = geom[g, 0] - px0, geom[g, 1] - py0
             ca, cb, cc, o, cut = geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6]
-            for p in range(num_px):
-                if done[p]:
-                    continue
-                dx, dy = fx[p] - mx, fy[p] - my
-                power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-                if power > 0.0 or power < cut:
-                    continue
-                alpha = min(alpha_max, o * math.exp(power))
-                if alpha < alpha_min:
-                    continue
-                test = trans[p] * (1.0 - alpha)
-                if test < trans_min:
-                    done[p] = True
-                    remaining -= 1
-                    continue
-                w = alpha * trans[p]
-                for ch in range(d):
-                    color[p, ch] += w * colors[g, ch]
-                trans[p] = test
-                last[p] = k - start + 1
+            x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
+            for base in range(y_lo * tile_size, y_hi * tile_size + 1, tile_size):
+                for p in range(base + x_lo, base + x_hi + 1):
+                    if done[p]:
+                        continue
+                    dx, dy = fx[p] - mx, fy[p] - my
+                    power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
+                    if power > 0.0 or power < cut:
+                        continue
+                    alpha = min(alpha_max, o * math.exp(power))
+                    if alpha < alpha_min:
+                        continue
+                    test = trans[p] * (1.0 - alpha)
+                    if test < trans_min:
+                        done[p] = True
+                        remaining -= 1
+                        continue
+                    w = alpha * trans[p]
+                    for ch in range(d):
+                        color[p, ch] += w * colors[g, ch]
+                    trans[p] = test
+                    last[p] = k - start + 1
         for p in range(num_px):
             x, y = px0 + ix[p], py0 + iy[p]
             if x < width and y < height:
@@ -130,8 +171,23 @@ def forward(offsets, ids, geom, colors, background, width, height, tile_size, ti
                 last_out[y, x] = last[p]
 
 
+@njit(inline="always", cache=True)
+def _load_tile(px0, py0, ix, iy, width, height, trans_final, last_in, trans, last):
+    """Fill trans / last [P] of the tile at (px0, py0) from the forward pass (last = 0 for pixels outside the
+    image); returns the tile's longest replay (max last)."""
+    longest = 0
+    for p in range(ix.shape[0]):
+        x, y = px0 + ix[p], py0 + iy[p]
+        last[p] = 0
+        if x < width and y < height:
+            trans[p] = trans_final[y, x]
+            last[p] = last_in[y, x]
+            longest = max(longest, last[p])
+    return longest
+
+
 @njit(parallel=True, cache=True)
-def backward(offsets, ids, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
+def backward(offsets, ids, rects, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
              trans_final, last_in, grad_image, grad_alpha, num_slices):
     """Back-to-front replay. Returns per-Gaussian gradients [N, 6 + D]: mean x, y, conic a, b, c, opacity,
     colour[D] (for loss gradients grad_image [D, H, W] and grad_alpha [H, W])."""
@@ -148,14 +204,10 @@ def backward(offsets, ids, geom, colors, background, width, height, tile_size, t
         gcol = np.empty(d)
         for t in range(sl, num_tiles, num_slices):
             px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
-            longest = 0
+            longest = _load_tile(px0, py0, ix, iy, width, height, trans_final, last_in, trans, last)
             for p in range(num_px):
                 x, y = px0 + ix[p], py0 + iy[p]
-                last[p] = 0
                 if x < width and y < height:
-                    trans[p] = trans_final[y, x]
-                    last[p] = last_in[y, x]
-                    longest = max(longest, last[p])
                     gb = 0.0
                     for ch in range(d):
                         gpix[p, ch] = grad_image[ch, y, x]
@@ -168,37 +220,39 @@ def backward(offsets, ids, geom, colors, background, width, height, tile_size, t
                 ca, cb, cc, o, cut = geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6]
                 s_x = s_y = s_xx = s_xy = s_yy = s_o = 0.0
                 gcol[:] = 0.0
-                for p in range(num_px):
-                    if j >= last[p]:
-                        continue
-                    dx, dy = fx[p] - mx, fy[p] - my
-                    power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-                    if power > 0.0 or power < cut:
-                        continue
-                    gauss = math.exp(power)
-                    raw = o * gauss
-                    alpha = min(alpha_max, raw)
-                    if alpha < alpha_min:
-                        continue
-                    inv = 1.0 / (1.0 - alpha)
-                    t_front = trans[p] * inv
-                    w = alpha * t_front
-                    gc = 0.0
-                    for ch in range(d):
-                        gc += gpix[p, ch] * colors[g, ch]
-                        gcol[ch] += w * gpix[p, ch]
-                    if raw < alpha_max:
-                        dl_dalpha = gc * t_front - behind[p] * inv
-                        la = dl_dalpha * alpha
-                        lx, ly = la * dx, la * dy
-                        s_x += lx
-                        s_y += ly
-                        s_xx += lx * dx
-                        s_xy += lx * dy
-                        s_yy += ly * dy
-                        s_o += dl_dalpha * gauss
-                    behind[p] += w * gc
-                    trans[p] = t_front
+                x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
+                for base in range(y_lo * tile_size, y_hi * tile_size + 1, tile_size):
+                    for p in range(base + x_lo, base + x_hi + 1):
+                        if j >= last[p]:
+                            continue
+                        dx, dy = fx[p] - mx, fy[p] - my
+                        power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
+                        if power > 0.0 or power < cut:
+                            continue
+                        gauss = math.exp(power)
+                        raw = o * gauss
+                        alpha = min(alpha_max, raw)
+                        if alpha < alpha_min:
+                            continue
+                        inv = 1.0 / (1.0 - alpha)
+                        t_front = trans[p] * inv
+                        w = alpha * t_front
+                        gc = 0.0
+                        for ch in range(d):
+                            gc += gpix[p, ch] * colors[g, ch]
+                            gcol[ch] += w * gpix[p, ch]
+                        if raw < alpha_max:
+                            dl_dalpha = gc * t_front - behind[p] * inv
+                            la = dl_dalpha * alpha
+                            lx, ly = la * dx, la * dy
+                            s_x += lx
+                            s_y += ly
+                            s_xx += lx * dx
+                            s_xy += lx * dy
+                            s_yy += ly * dy
+                            s_o += dl_dalpha * gauss
+                        behind[p] += w * gc
+                        trans[p] = t_front
                 buf[sl, g, 0] += ca * s_x + cb * s_y
                 buf[sl, g, 1] += cb * s_x + cc * s_y
                 buf[sl, g, 2] += -0.5 * s_xx
@@ -225,7 +279,7 @@ NUM_MOMENTS = 15  # sum s dx^i dy^j for i + j <= 4, in the order of `gram`'s acc
 
 
 @njit(parallel=True, cache=True)
-def gram(offsets, ids, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
+def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
          trans_final, last_in, pixel_weights, num_slices):
     """Per-Gaussian moment sums for the attribute Gram, [N, 15 + 6 D + 1] (pixels p weighted by pixel_weights).
 
@@ -251,14 +305,10 @@ def gram(offsets, ids, geom, colors, background, width, height, tile_size, tiles
         u = np.empty(d)
         for t in range(sl, num_tiles, num_slices):
             px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
-            longest = 0
+            longest = _load_tile(px0, py0, ix, iy, width, height, trans_final, last_in, trans, last)
             for p in range(num_px):
                 x, y = px0 + ix[p], py0 + iy[p]
-                last[p] = 0
                 if x < width and y < height:
-                    trans[p] = trans_final[y, x]
-                    last[p] = last_in[y, x]
-                    longest = max(longest, last[p])
                     wpix[p] = pixel_weights[y, x]
                     for ch in range(d):
                         behind[p, ch] = trans[p] * background[ch]
@@ -270,55 +320,57 @@ def gram(offsets, ids, geom, colors, background, width, height, tile_size, tiles
                 m0 = m1 = m2 = m3 = m4 = m5 = m6 = m7 = m8 = m9 = m10 = m11 = m12 = m13 = m14 = 0.0
                 ww = 0.0
                 cross[:] = 0.0
-                for p in range(num_px):
-                    if j >= last[p]:
-                        continue
-                    dx, dy = fx[p] - mx, fy[p] - my
-                    power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-                    if power > 0.0 or power < cut:
-                        continue
-                    raw = o * math.exp(power)
-                    alpha = min(alpha_max, raw)
-                    if alpha < alpha_min:
-                        continue
-                    inv = 1.0 / (1.0 - alpha)
-                    t_front = trans[p] * inv
-                    w = alpha * t_front
-                    wp = wpix[p]
-                    uu = 0.0
-                    for ch in range(d):
-                        u[ch] = colors[g, ch] * t_front - behind[p, ch] * inv
-                        uu += u[ch] * u[ch]
-                        behind[p, ch] += w * colors[g, ch]
-                    trans[p] = t_front
-                    ww += wp * w * w
-                    if raw < alpha_max:
-                        xx, xy, yy = dx * dx, dx * dy, dy * dy
-                        s = wp * uu * alpha * alpha
-                        m0 += s
-                        m1 += s * dx
-                        m2 += s * dy
-                        m3 += s * xx
-                        m4 += s * xy
-                        m5 += s * yy
-                        m6 += s * xx * dx
-                        m7 += s * xx * dy
-                        m8 += s * dx * yy
-                        m9 += s * yy * dy
-                        m10 += s * xx * xx
-                        m11 += s * xx * xy
-                        m12 += s * xx * yy
-                        m13 += s * xy * yy
-                        m14 += s * yy * yy
-                        q = wp * w * alpha
+                x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
+                for base in range(y_lo * tile_size, y_hi * tile_size + 1, tile_size):
+                    for p in range(base + x_lo, base + x_hi + 1):
+                        if j >= last[p]:
+                            continue
+                        dx, dy = fx[p] - mx, fy[p] - my
+                        power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
+                        if power > 0.0 or power < cut:
+                            continue
+                        raw = o * math.exp(power)
+                        alpha = min(alpha_max, raw)
+                        if alpha < alpha_min:
+                            continue
+                        inv = 1.0 / (1.0 - alpha)
+                        t_front = trans[p] * inv
+                        w = alpha * t_front
+                        wp = wpix[p]
+                        uu = 0.0
                         for ch in range(d):
-                            qu = q * u[ch]
-                            cross[ch] += qu * dx
-                            cross[d + ch] += qu * dy
-                            cross[2 * d + ch] += qu * xx
-                            cross[3 * d + ch] += qu * xy
-                            cross[4 * d + ch] += qu * yy
-                            cross[5 * d + ch] += qu
+                            u[ch] = colors[g, ch] * t_front - behind[p, ch] * inv
+                            uu += u[ch] * u[ch]
+                            behind[p, ch] += w * colors[g, ch]
+                        trans[p] = t_front
+                        ww += wp * w * w
+                        if raw < alpha_max:
+                            xx, xy, yy = dx * dx, dx * dy, dy * dy
+                            s = wp * uu * alpha * alpha
+                            m0 += s
+                            m1 += s * dx
+                            m2 += s * dy
+                            m3 += s * xx
+                            m4 += s * xy
+                            m5 += s * yy
+                            m6 += s * xx * dx
+                            m7 += s * xx * dy
+                            m8 += s * dx * yy
+                            m9 += s * yy * dy
+                            m10 += s * xx * xx
+                            m11 += s * xx * xy
+                            m12 += s * xx * yy
+                            m13 += s * xy * yy
+                            m14 += s * yy * yy
+                            q = wp * w * alpha
+                            for ch in range(d):
+                                qu = q * u[ch]
+                                cross[ch] += qu * dx
+                                cross[d + ch] += qu * dy
+                                cross[2 * d + ch] += qu * xx
+                                cross[3 * d + ch] += qu * xy
+                                cross[4 * d + ch] += qu * yy
+                                cross[5 * d + ch] += qu
                 row = buf[sl, g]
                 row[0] += m0
                 row[1] += m1

@@ -19,13 +19,23 @@ from utils.errors import UserError
 _FLOAT_DTYPES = (torch.float32, torch.float64)
 
 
+BLOCK_PIXELS = 16  # side of the pixel blocks the kernels work on (measured: 8-16 beat 4; CUDA 3DGS also uses 16)
+
+
 @dataclass
 class CompiledBins:
-    """Per-tile depth-sorted Gaussian lists in CSR form."""
+    """Per-block depth-sorted Gaussian lists in CSR form, and each Gaussian's reach in pixels.
 
-    offsets: np.ndarray  # [T + 1] int64: tile t's list is ids[offsets[t]:offsets[t + 1]]
-    ids: np.ndarray  # [M] int32 Gaussian ids, front to back within each tile
-    tiles_x: int
+    The kernels work on blocks of `block` x `block` pixels (whole tiles, `block_tiles` per side) while a Gaussian
+    still reaches exactly the pixels of its tile rectangle (`tile_ranges` at `settings.tile_size`): `rects` clips it,
+    so the images equal the torch path's at the same tile size whatever the block.
+    """
+
+    offsets: np.ndarray  # [B + 1] int64: block b's list is ids[offsets[b]:offsets[b + 1]]
+    ids: np.ndarray  # [M] int32 Gaussian ids, front to back within each block
+    blocks_x: int
+    block: int  # pixels per block side
+    rects: np.ndarray  # [N, 4] int64 inclusive pixel rectangle x0, x1, y0, y1 of each listed Gaussian
 
 
 def _use_torch_threads() -> int:
@@ -61,31 +71,36 @@ def _float64(t: torch.Tensor) -> np.ndarray:
 def bin_gaussians_compiled(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
                            radii: torch.Tensor, depths: torch.Tensor, width: int, height: int,
                            settings: RasterSettings) -> CompiledBins:
-    """Tile lists by a parallel counting sort; within a tile, Gaussians keep their (stable) depth order."""
+    """Block lists by a parallel counting sort; within a block, Gaussians keep their (stable) depth order."""
     tile_size = settings.tile_size
-    tiles_x, tiles_y = -(-width // tile_size), -(-height // tile_size)
+    per_block = max(1, BLOCK_PIXELS // tile_size)  # tiles per block side
+    block = per_block * tile_size
+    blocks_x, blocks_y = -(-width // block), -(-height // block)
     with torch.no_grad():
         ids = torch.nonzero(radii > 0).squeeze(1)  # [n]
         ids = ids[torch.argsort(depths.detach()[ids], stable=True)]  # depth order, ties by id (as the torch path)
         x0, x1, y0, y1 = tile_ranges(means2d.detach()[ids], conics.detach()[ids], opacities.detach()[ids],
-                                     radii[ids], width, height, tile_size, settings.alpha_min)
+                                     radii[ids], width, height, tile_size, settings.alpha_min)  # [n] each, tiles
+        rects = torch.zeros(means2d.shape[0], 4, dtype=torch.int64)
+        rects[ids] = torch.stack([x0 * tile_size, (x1 + 1) * tile_size - 1, y0 * tile_size,
+                                  (y1 + 1) * tile_size - 1], 1)
     threads = _use_torch_threads()
-    offsets, lists = kernels.bin_tiles(_numpy(x0), _numpy(x1), _numpy(y0), _numpy(y1), _numpy(ids),
-                                       tiles_x * tiles_y, tiles_x, threads)
-    return CompiledBins(offsets, lists, tiles_x)
+    offsets, lists = kernels.bin_tiles(_numpy(x0 // per_block), _numpy(x1 // per_block), _numpy(y0 // per_block),
+                                       _numpy(y1 // per_block), _numpy(ids), blocks_x * blocks_y, blocks_x, threads)
+    return CompiledBins(offsets, lists, blocks_x, block, rects.numpy())
 
 
 def _kernel_args(bins: CompiledBins, means2d, conics, opacities, colors, background, width: int, height: int,
                  settings: RasterSettings) -> tuple:
-    """The arguments every kernel starts with: bins, packed float64 attributes (`kernels` module docstring),
-    colours, background, image and tile geometry, alpha cut-offs."""
+    """The arguments every kernel starts with: bins and reach rectangles, packed float64 attributes (`kernels`
+    module docstring), colours, background, image and block geometry, alpha cut-offs."""
     with torch.no_grad():
         o = opacities.detach().double()
         cut = torch.log(settings.alpha_min / o.clamp_min(1e-300)) - 1e-9
         geom = torch.cat([means2d.detach().double(), conics.detach().double(), o[:, None], cut[:, None],
                           torch.zeros_like(o)[:, None]], dim=1)  # [N, 8]
-    return (bins.offsets, bins.ids, geom.numpy(), _float64(colors), _float64(background), width, height,
-            settings.tile_size, bins.tiles_x, float(settings.alpha_min), float(settings.alpha_max))
+    return (bins.offsets, bins.ids, bins.rects, geom.numpy(), _float64(colors), _float64(background), width, height,
+            bins.block, bins.blocks_x, float(settings.alpha_min), float(settings.alpha_max))
 
 
 def composite_compiled(bins: CompiledBins, means2d, conics, opacities, colors, background, width: int, height: int,

@@ -1,7 +1,7 @@
 """Rasterizer speed: the tiled fast path vs the dense autograd reference, and `attribute_gram` vs a training step.
 
     python benchmarks/bench_rasterize.py [--presets 2k@128 10k@256 garden] [--repeats 5] [--threads 2]
-        [--backends torch,compiled] [--json PATH]
+        [--backends torch,compiled] [--rounds 3] [--json PATH]
     python benchmarks/bench_rasterize.py --resolution_scaling [--model output/lego] [--widths 200 400 800]
         [--backends compiled]
 
@@ -15,7 +15,9 @@ Timed (warm-up, then the median of R runs): fast forward (no grad), fast forward
 of the rasterizer), the dense reference forward+backward (only where N x H x W <= --ref_max_pairs), and
 `attribute_gram` (one view's Fisher-ready Gram matrices). Prints a table and writes JSON to benchmarks/results/
 (or --json PATH): one row per (preset, backend) with fwd_ms, fwd_bwd_ms, gram_ms. With several --backends each
-runs in its own process (numba's and torch's thread pools never share one) and a torch/compiled ratio table follows.
+runs in its own process (numba's and torch's thread pools never share one) and a torch/compiled ratio table follows;
+`--rounds R` alternates the backend processes R times and reports median times and the median (and range) of the
+per-round ratios, which a noisy shared machine moves far less than the times themselves.
 
 `--resolution_scaling` times instead one whole training step (render forward + L1/SSIM loss + backward) of a
 fixed set of 3D Gaussians from one view of a Blender scene (`--source`, default ../shared/data/lego) at each of
@@ -212,6 +214,8 @@ def main() -> None:
     parser.add_argument("--num_random_points", type=int, default=10_000, help="fresh model's points (train.py's)")
     parser.add_argument("--backends", default="torch",
                         help="comma-separated rasterizer backends to time: torch, compiled, auto")
+    parser.add_argument("--rounds", type=int, default=1,
+                        help="with several --backends: run them alternately this many times (noisy machines)")
     parser.add_argument("--json", default=None,
                         help="write the JSON here (default benchmarks/results/rasterize_<time>.json)")
     args = parser.parse_args()
@@ -264,29 +268,49 @@ def write_results(kind: str, args: argparse.Namespace, rows: list[dict]) -> None
     print(f"wrote {out}")
 
 
+TIMED = ("fwd_ms", "fwd_bwd_ms", "gram_ms")
+
+
 def run_backends_apart(args: argparse.Namespace, backends: list[str]) -> None:
-    """Run each backend in its own process, then print the torch / other ratios and write all rows."""
-    rows = []
+    """Run each backend in its own process, `--rounds` times alternately, then print the other / first backend
+    speed-ups (the median of the per-round ratios, and their range) and write one row per (preset, backend): the
+    median times over the rounds, each round's times under `<key>_rounds`."""
+    runs: dict[tuple[str, str], list[dict]] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for backend in backends:
-            part = Path(tmp) / f"{backend}.json"
-            cmd = [sys.executable, __file__, "--backends", backend, "--json", str(part), "--presets", *args.presets,
-                   "--repeats", str(args.repeats), "--tile_size", str(args.tile_size), "--chunk_size",
-                   str(args.chunk_size), "--garden_points", str(args.garden_points), "--ref_max_pairs",
-                   str(args.ref_max_pairs)] + (["--threads", str(args.threads)] if args.threads else [])
-            subprocess.run(cmd, check=True)
-            rows += json.loads(part.read_text())["rows"]
-    base = {r["preset"]: r for r in rows if r["backend"] == backends[0]}
-    print(f"\nspeed-up of each backend over {backends[0]} (time {backends[0]} / time backend)")
-    print(f"{'preset':9} {'backend':9} {'fwd ms':>8} {'fwd+bwd ms':>10} {'gram ms':>8} {'fwd x':>7} {'f+b x':>7} "
-          f"{'gram x':>7}")
+        for round_index in range(args.rounds):
+            for backend in backends:
+                part = Path(tmp) / f"{backend}_{round_index}.json"
+                cmd = [sys.executable, __file__, "--backends", backend, "--json", str(part), "--presets",
+                       *args.presets, "--repeats", str(args.repeats), "--tile_size", str(args.tile_size),
+                       "--chunk_size", str(args.chunk_size), "--garden_points", str(args.garden_points),
+                       "--ref_max_pairs", str(args.ref_max_pairs)] + \
+                    (["--threads", str(args.threads)] if args.threads else [])
+                subprocess.run(cmd, check=True)
+                for row in json.loads(part.read_text())["rows"]:
+                    runs.setdefault((row["preset"], backend), []).append(row)
+    rows = []
+    for (preset, backend), per_round in runs.items():
+        row = dict(per_round[0])
+        for key in TIMED:
+            row[f"{key}_rounds"] = [r[key] for r in per_round]
+            row[key] = statistics.median(row[f"{key}_rounds"])
+        rows.append(row)
+    first = backends[0]
+    base = {r["preset"]: r for r in rows if r["backend"] == first}
+    print(f"\nspeed-up of each backend over {first} (time {first} / time backend; {args.rounds} round(s) "
+          "alternating the backends: median ms, median [min-max] of the per-round ratios)")
+    print(f"{'preset':9} {'backend':9} {'fwd ms':>8} {'fwd+bwd ms':>10} {'gram ms':>8} {'fwd x':>15} "
+          f"{'f+b x':>15} {'gram x':>15}")
     for r in rows:
         b = base[r["preset"]]
+        cells = []
+        for key in TIMED:
+            ratios = [t0 / t1 for t0, t1 in zip(b[f"{key}_rounds"], r[f"{key}_rounds"])]
+            r[key.replace("_ms", "_speedup")] = statistics.median(ratios)
+            cells.append(f"{statistics.median(ratios):.1f} [{min(ratios):.1f}-{max(ratios):.1f}]")
         print(f"{r['preset']:9} {r['backend']:9} {r['fwd_ms']:8.1f} {r['fwd_bwd_ms']:10.1f} {r['gram_ms']:8.1f} "
-              f"{b['fwd_ms'] / r['fwd_ms']:7.1f} {b['fwd_bwd_ms'] / r['fwd_bwd_ms']:7.1f} "
-              f"{b['gram_ms'] / r['gram_ms']:7.1f}")
+              + " ".join(f"{c:>15}" for c in cells))
     write_results("rasterize", args, rows)
-
 
 if __name__ == "__main__":
     main()

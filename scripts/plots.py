@@ -6,6 +6,7 @@ series are labelled by method and options as the runs record them."""
 from __future__ import annotations
 
 import math
+import textwrap
 from collections import defaultdict
 from pathlib import Path
 from statistics import mean
@@ -28,7 +29,7 @@ def _label_axes(ax, xlabel: str, ylabel: str, title: str, legend_size: int) -> N
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=legend_size)
+    ax.legend(fontsize=legend_size, loc="upper left", bbox_to_anchor=(0.0, -0.2), frameon=False)  # below the axes
 
 
 def _line_plot(series: dict[str, dict], path: Path, figsize: tuple[float, float], xlabel: str, ylabel: str,
@@ -44,7 +45,7 @@ def _line_plot(series: dict[str, dict], path: Path, figsize: tuple[float, float]
 
 def _save(fig, path: Path) -> Path:
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, bbox_inches="tight")  # keeps a legend placed outside the axes
     plt.close(fig)
     return path
 
@@ -139,7 +140,8 @@ def chosen_cameras(runs, path: Path) -> Path | None:
         scatter(r.stages[0].get("train_views", []), c="black", marker="*", s=90, label="seed")
         for i, stage in enumerate(r.stages):
             scatter(stage.get("selected", []), color=cmap(i / max(1, len(r.stages) - 1)), s=40, label=f"step {i + 1}")
-        ax.set_title(f"{setting}\nseed {r.seed}", fontsize=9)
+        title = "\n".join(textwrap.wrap(setting, 34, break_on_hyphens=False)) + f"\nseed {r.seed}"
+        ax.set_title(title, fontsize=9)
         ax.set_aspect("equal")
         ax.set_xticks([])
         ax.set_yticks([])

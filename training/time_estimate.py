@@ -154,7 +154,7 @@ class RunTimeEstimator:
         """The estimator of a train.py `Run` (config, scene, plan, selector, state), from its current iteration.
 
         The Fisher probe times `fisher_view_blocks` of the first view outside the training set on the model as it
-        is at the estimate.
+        is at the estimate (the second of two calls, so a cold kernel cache's compile time is not counted).
         """
         from active.fisher import FISHER_PARAM_GROUPS, fisher_view_blocks
         from scene.resolution_policy import probe_image_size
@@ -168,9 +168,13 @@ class RunTimeEstimator:
 
         def fisher_probe() -> float:
             view = next((v for v in range(len(cameras)) if v not in state.train_views), 0)
+
+            def blocks() -> None:
+                fisher_view_blocks(state.gaussians, cameras[view], run.background, run.settings,
+                                   param_groups=FISHER_PARAM_GROUPS[cfg.active.fisher_params])
+            blocks()  # untimed: the first call compiles the Gram kernel when numba's cache is cold (~10 s)
             t0 = time.perf_counter()
-            fisher_view_blocks(state.gaussians, cameras[view], run.background, run.settings,
-                               param_groups=FISHER_PARAM_GROUPS[cfg.active.fisher_params])
+            blocks()
             return time.perf_counter() - t0
 
         return cls(run.plan, len(cameras), work, size, full_size, state.iteration,

@@ -74,6 +74,7 @@ def test_pixel_box_holds_every_reachable_pixel_and_little_else():
     assert nonempty > 100
     assert box(3.0, 3.0, 1.0, 2.0, 1.0, -2.0, tile) == (0, tile - 1, 0, tile - 1)  # not positive definite
     assert box(3.0, 3.0, float("nan"), 0.0, 1.0, -2.0, tile) == (0, tile - 1, 0, tile - 1)
+    assert box(3.0, 3.0, 1e-150, 0.0, 1e-150, -2.0, tile) == (0, tile - 1, 0, tile - 1)  # reach ~1e75 px: capped
     x_lo, x_hi, _, _ = box(3.0, 3.0, 1.0, 0.0, 1.0, 0.5, tile)
     assert x_lo > x_hi
 

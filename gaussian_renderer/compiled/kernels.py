@@ -93,8 +93,8 @@ def _pixel_box(mx, my, ca, cb, cc, cut, tile_size):
         return 0, -1, 0, -1
     if not (det > 0.0 and ca > 0.0 and cc > 0.0 and r2 <= 1e300 and abs(mx) < 1e15 and abs(my) < 1e15):
         return 0, last, 0, last
-    hx = math.sqrt(r2 * cc / det) * (1.0 + BOX_MARGIN) + BOX_MARGIN
-    hy = math.sqrt(r2 * ca / det) * (1.0 + BOX_MARGIN) + BOX_MARGIN
+    hx = min(1e9, math.sqrt(r2 * cc / det) * (1.0 + BOX_MARGIN) + BOX_MARGIN)  # capped: int() of inf is undefined
+    hy = min(1e9, math.sqrt(r2 * ca / det) * (1.0 + BOX_MARGIN) + BOX_MARGIN)
     # pixel i has its centre at i + 0.5: keep i with |i + 0.5 - m| <= h
     x_lo = max(0, int(math.ceil(mx - hx - 0.5)))
     x_hi = min(last, int(math.floor(mx + hx - 0.5)))

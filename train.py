@@ -257,6 +257,9 @@ def make_plan(cfg: TrainConfig, pool: int) -> StagePlan:
     return plan
 
 
+PROGRESS_EVERY_S = 30.0  # run_status.json gets the iteration and Gaussian count this often while training
+
+
 @dataclass
 class Run:
     """An open run: the loaded scene, its plan, the rasterizer set-up and the training state."""
@@ -272,6 +275,7 @@ class Run:
     rng: random.Random  # the view order of the training passes
     lr_schedule: PositionLRSchedule
     eta: RunTimeEstimator | None = None  # the one-line wall-time estimate after the first iterations
+    progress_written: float = field(default_factory=time.monotonic)  # when run_status.json last got the progress
 
 
 def open_run(cfg: TrainConfig, model_path: str) -> Run:
@@ -320,6 +324,9 @@ def train_stage(run: Run, progress: tqdm) -> None:
         progress.update(1)
         if run.eta is not None and (note := run.eta.after_iteration(state.iteration)) is not None:
             progress.write(note)
+        if time.monotonic() - run.progress_written >= PROGRESS_EVERY_S:
+            run.run_dir.progress(state.iteration, run.plan.total_iterations, state.gaussians.num_gaussians)
+            run.progress_written = time.monotonic()
         if state.iteration % 10 == 0:
             progress.set_postfix(loss=f"{loss.item():.4f}", psnr=f"{train_psnr.item():.2f}",
                                  gaussians=state.gaussians.num_gaussians, views=len(state.train_views))

@@ -5,6 +5,7 @@ import json
 import os
 import re
 import shutil
+import time
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,8 @@ KEEP_CHECKPOINTS = 2  # the newest two: a fallback if the newest turns out unrea
 
 
 class RunDirectory:
-    """One model directory: `run_status.json` ("running" / "complete"), `cfg_args`, `checkpoints/`."""
+    """One model directory: `run_status.json` ("running" with the progress so far / "complete"), `cfg_args`,
+    `checkpoints/`."""
 
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)
@@ -57,6 +59,11 @@ class RunDirectory:
             raise UserError(f"cannot write to model path {self.path} ({exc.strerror}); "
                             "choose a writable -m/--model_path") from None
         write_json(self.path / "cfg_args", config)
+
+    def progress(self, iteration: int, total_iterations: int, num_gaussians: int) -> None:
+        """Record where a running run is (read by people and scripts watching a --quiet run, e.g. a grid job)."""
+        write_json(self.status_file, {"status": "running", "iteration": iteration, "total_iterations": total_iterations,
+                                      "num_gaussians": num_gaussians, "updated": time.strftime("%Y-%m-%d %H:%M:%S")})
 
     def finish(self, summary: dict[str, Any]) -> None:
         write_json(self.status_file, {"status": "complete", **summary})

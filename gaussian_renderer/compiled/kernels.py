@@ -288,7 +288,7 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
     and L a per-Gaussian constant (conic, 1 / opacity). So sum_p |u|^2 v v^T = L M L^T needs only the 15 moments
     of s = |u|^2 alpha^2 over dx, dy (1, dx, dy, dx^2, dx dy, dy^2, dx^3, dx^2 dy, dx dy^2, dy^3, dx^4, dx^3 dy,
     dx^2 dy^2, dx dy^3, dy^4), and sum_p w v u^T = L X with X [6, D] = sum_p w alpha m u^T (row-major); last,
-    sum_p w^2. `ops.assemble_gram` applies L once per Gaussian.
+    sum_p w^2. `assemble_gram` applies L once per Gaussian.
     """
     n, d = colors.shape
     row_len = NUM_MOMENTS + GEO * d + 1
@@ -391,3 +391,46 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
                     row[NUM_MOMENTS + a] += cross[a]
                 row[row_len - 1] += ww
     return _sum_slices(buf)
+
+
+# Where each entry of the monomial Gram M = sum s m m^T (m = dx, dy, dx^2, dx dy, dy^2, 1) sits among the 15 moments
+# (1, dx, dy, dx^2, dx dy, dy^2, dx^3, dx^2 dy, dx dy^2, dy^3, dx^4, dx^3 dy, dx^2 dy^2, dx dy^3, dy^4).
+MOMENT_INDEX = np.array([[3, 4, 6, 7, 8, 1],
+                         [4, 5, 7, 8, 9, 2],
+                         [6, 7, 10, 11, 12, 3],
+                         [7, 8, 11, 12, 13, 4],
+                         [8, 9, 12, 13, 14, 5],
+                         [1, 2, 3, 4, 5, 0]], np.int64)
+
+
+@njit(parallel=True, cache=True)
+def assemble_gram(sums, conics, opacities, d):
+    """[N, 6 + D, 6 + D] Gram from the moment sums [N, 15 + 6 D + 1] of `gram` (conics [N, 3], opacities [N]):
+    geometry block L M L^T, cross block L X, colour block (sum w^2) I, with
+    L = blockdiag([[a, b], [b, c]], -1/2, -1, -1/2, 1/o) (so v = alpha L m). Exactly symmetric, float64."""
+    n = sums.shape[0]
+    size = GEO + d
+    out = np.zeros((n, size, size))
+    for i in prange(n):
+        lmat = np.zeros((GEO, GEO))
+        lmat[0, 0], lmat[0, 1], lmat[1, 0], lmat[1, 1] = conics[i, 0], conics[i, 1], conics[i, 1], conics[i, 2]
+        lmat[2, 2], lmat[3, 3], lmat[4, 4] = -0.5, -1.0, -0.5
+        lmat[5, 5] = 1.0 / max(opacities[i], 1e-300)
+        for r in range(GEO):
+            for c in range(r, GEO):
+                acc = 0.0
+                for k in range(GEO):
+                    if lmat[r, k] != 0.0:
+                        for m in range(GEO):
+                            acc += lmat[r, k] * sums[i, MOMENT_INDEX[k, m]] * lmat[c, m]
+                out[i, r, c] = acc
+                out[i, c, r] = acc
+            for ch in range(d):
+                acc = 0.0
+                for k in range(GEO):
+                    acc += lmat[r, k] * sums[i, NUM_MOMENTS + k * d + ch]
+                out[i, r, GEO + ch] = acc
+                out[i, GEO + ch, r] = acc
+        for ch in range(d):
+            out[i, GEO + ch, GEO + ch] = sums[i, NUM_MOMENTS + GEO * d]
+    return out

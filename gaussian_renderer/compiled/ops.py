@@ -156,44 +156,10 @@ def attribute_gram_compiled(means2d: torch.Tensor, conics: torch.Tensor, opaciti
                             weights: torch.Tensor | None = None) -> torch.Tensor:
     """`gaussian_renderer.fisher_partials.attribute_gram` by the compiled kernels: float64 [N, A, A]."""
     means2d, conics, opacities, colors, background = prepare_inputs(means2d, conics, opacities, colors, background)
-    n, d = colors.shape
+    d = colors.shape[1]
     bins = bin_gaussians_compiled(means2d, conics, opacities, radii, depths, width, height, settings)
     _, trans, last = composite_compiled(bins, means2d, conics, opacities, colors, background, width, height, settings)
     pixel_weights = np.ones((height, width)) if weights is None else _float64(weights)
-    sums = torch.from_numpy(kernels.gram(*_kernel_args(bins, means2d, conics, opacities, colors, background, width,
-                                                       height, settings), trans.numpy(), last.numpy(), pixel_weights,
-                                         _use_torch_threads()))
-    return assemble_gram(sums, conics, opacities, d)
-
-
-# Where each entry of the monomial Gram M = sum s m m^T (m = dx, dy, dx^2, dx dy, dy^2, 1) sits among the 15 moments
-# (1, dx, dy, dx^2, dx dy, dy^2, dx^3, dx^2 dy, dx dy^2, dy^3, dx^4, dx^3 dy, dx^2 dy^2, dx dy^3, dy^4).
-_MOMENT_INDEX = torch.tensor([[3, 4, 6, 7, 8, 1],
-                              [4, 5, 7, 8, 9, 2],
-                              [6, 7, 10, 11, 12, 3],
-                              [7, 8, 11, 12, 13, 4],
-                              [8, 9, 12, 13, 14, 5],
-                              [1, 2, 3, 4, 5, 0]])
-
-
-def assemble_gram(sums: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, d: int) -> torch.Tensor:
-    """[N, A, A] Gram from the per-Gaussian moment sums [N, 15 + 6 D + 1] of `kernels.gram`: geometry block
-    L M L^T, cross block L X, colour block (sum w^2) I, with v = alpha L m. Exactly symmetric, float64."""
-    n, geo = sums.shape[0], NUM_GEOMETRY_ATTRIBUTES
-    a, b, c = conics.double().unbind(-1)
-    zeros = torch.zeros_like(a)
-    lmap = torch.stack([torch.stack([a, b, zeros, zeros, zeros, zeros], -1),
-                        torch.stack([b, c, zeros, zeros, zeros, zeros], -1),
-                        torch.tensor([0, 0, -0.5, 0, 0, 0], dtype=torch.float64).expand(n, 6),
-                        torch.tensor([0, 0, 0, -1.0, 0, 0], dtype=torch.float64).expand(n, 6),
-                        torch.tensor([0, 0, 0, 0, -0.5, 0], dtype=torch.float64).expand(n, 6),
-                        torch.stack([zeros] * 5 + [1 / opacities.double().clamp_min(1e-300)], -1)], 1)  # [N, 6, 6]
-    moments = sums[:, _MOMENT_INDEX]  # [N, 6, 6]
-    geo_block = lmap @ moments @ lmap.transpose(1, 2)
-    cross = lmap @ sums[:, kernels.NUM_MOMENTS:-1].reshape(n, geo, d)  # [N, 6, D]
-    gram = torch.zeros(n, geo + d, geo + d, dtype=torch.float64)
-    gram[:, :geo, :geo] = 0.5 * (geo_block + geo_block.transpose(1, 2))
-    gram[:, :geo, geo:] = cross
-    gram[:, geo:, :geo] = cross.transpose(1, 2)
-    gram[:, geo:, geo:] = sums[:, -1, None, None] * torch.eye(d, dtype=torch.float64)
-    return gram
+    sums = kernels.gram(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height, settings),
+                        trans.numpy(), last.numpy(), pixel_weights, _use_torch_threads())  # [N, 15 + 6 D + 1]
+    return torch.from_numpy(kernels.assemble_gram(sums, _float64(conics), _float64(opacities), d))

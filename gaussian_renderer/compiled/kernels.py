@@ -112,6 +112,21 @@ def _pair_box(geom, rects, g, px0, py0, tile_size):
             min(y_hi, rects[g, 3] - py0))
 
 
+@njit(inline="always", cache=True)
+def _pair_alpha(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max):
+    """(gauss, raw = o gauss, alpha) of a pair at pixel offset (dx, dy); alpha = 0 where the pair is skipped
+    (power > 0, power below the cut, or alpha < alpha_min). The one copy of the compositing test."""
+    power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
+    if power > 0.0 or power < cut:
+        return 0.0, 0.0, 0.0
+    gauss = math.exp(power)
+    raw = o * gauss
+    alpha = min(alpha_max, raw)
+    if alpha < alpha_min:
+        return gauss, raw, 0.0
+    return gauss, raw, alpha
+
+
 @njit(parallel=True, cache=True)
 def forward(offsets, ids, rects, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
             trans_min, image, trans_out, last_out):
@@ -145,12 +160,8 @@ def forward(offsets, ids, rects, geom, colors, background, width, height, tile_s
                 for p in range(base + x_lo, base + x_hi + 1):
                     if done[p]:
                         continue
-                    dx, dy = fx[p] - mx, fy[p] - my
-                    power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-                    if power > 0.0 or power < cut:
-                        continue
-                    alpha = min(alpha_max, o * math.exp(power))
-                    if alpha < alpha_min:
+                    _, _, alpha = _pair_alpha(fx[p] - mx, fy[p] - my, ca, cb, cc, o, cut, alpha_min, alpha_max)
+                    if alpha == 0.0:
                         continue
                     test = trans[p] * (1.0 - alpha)
                     if test < trans_min:
@@ -226,13 +237,8 @@ def backward(offsets, ids, rects, geom, colors, background, width, height, tile_
                         if j >= last[p]:
                             continue
                         dx, dy = fx[p] - mx, fy[p] - my
-                        power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-                        if power > 0.0 or power < cut:
-                            continue
-                        gauss = math.exp(power)
-                        raw = o * gauss
-                        alpha = min(alpha_max, raw)
-                        if alpha < alpha_min:
+                        gauss, raw, alpha = _pair_alpha(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
+                        if alpha == 0.0:
                             continue
                         inv = 1.0 / (1.0 - alpha)
                         t_front = trans[p] * inv
@@ -326,12 +332,8 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
                         if j >= last[p]:
                             continue
                         dx, dy = fx[p] - mx, fy[p] - my
-                        power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-                        if power > 0.0 or power < cut:
-                            continue
-                        raw = o * math.exp(power)
-                        alpha = min(alpha_max, raw)
-                        if alpha < alpha_min:
+                        _, raw, alpha = _pair_alpha(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
+                        if alpha == 0.0:
                             continue
                         inv = 1.0 / (1.0 - alpha)
                         t_front = trans[p] * inv

@@ -63,6 +63,7 @@ class GridConfig:
     slurm: SlurmOptions = field(default_factory=SlurmOptions)
     dry_run: bool = False
     uncertainty: bool = False  # render.py --uncertainty in every job
+    progress_every_s: float = 300.0  # a line per running job (its run_status.json progress) this often
 
     @property
     def setup_dir(self) -> Path:
@@ -178,6 +179,8 @@ class Tracker:
                                    "model_dir": spec.model_dir, "command": train_command(spec),
                                    "log": spec.log_path, "error": "", "seconds": None}
         self.ran = 0
+        self.progress_every_s = cfg.progress_every_s
+        self.last_report = time.time()
 
     def count(self, *states: str) -> int:
         return sum(j["state"] in states for j in self.jobs.values())
@@ -200,6 +203,24 @@ class Tracker:
         if job["state"] == "failed":
             line += f"\n    {job['error']} (log: {job['log']})"
         log.info(line)
+        self.write()
+
+    def report_running(self) -> None:
+        """Every `progress_every_s`: one line per running job with the progress its train.py records in
+        run_status.json (iteration / total, Gaussians), also kept in grid_status.json as the job's "progress"."""
+        if time.time() - self.last_report < self.progress_every_s:
+            return
+        self.last_report = time.time()
+        for job in self.jobs.values():
+            if job["state"] != "running":
+                continue
+            status = _read_json(Path(job["model_dir"]) / "run_status.json")
+            if not (isinstance(status, dict) and status.get("status") == "running" and "iteration" in status):
+                continue
+            job["progress"] = {k: status.get(k) for k in ("iteration", "total_iterations", "num_gaussians",
+                                                          "updated")}
+            log.info(f"  running {job['key']}: iteration {status['iteration']}/{status.get('total_iterations', '?')}, "
+                     f"{status.get('num_gaussians', '?')} Gaussians (as of {status.get('updated', '?')})")
         self.write()
 
     def write(self) -> None:
@@ -289,6 +310,7 @@ def _wait(running: dict[str, tuple[JobSpec, Any]], tracker: Tracker, poll_s: flo
         if finished and until_one:
             return
         if running:
+            tracker.report_running()
             time.sleep(poll_s)
 
 

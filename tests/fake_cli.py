@@ -1,8 +1,8 @@
 """A stand-in interpreter for the grid's CLI calls (`grid.py --python FAKE`): records each train/render/metrics
 call as a JSON line in $FAKE_LOG and writes the files the real CLIs would (selection.json with closed-form oracle
 counts, run_status.json, results.json). $FAKE_FAIL (':'-separated model paths) makes train.py fail with an
-`error:` line; $FAKE_SLEEP seconds are spent in train.py after it made checkpoints/, unless that existed (a resumed
-run)."""
+`error:` line; $FAKE_SLEEP seconds are spent in train.py after it made checkpoints/ and wrote its progress to
+run_status.json (iteration 7, 123 Gaussians), unless checkpoints/ existed (a resumed run)."""
 from __future__ import annotations
 
 import os
@@ -32,6 +32,8 @@ if Path(args[0]).name == "train.py":
         sys.exit(2)
     if not (model / "checkpoints").is_dir():  # a resumed run (checkpoints on disk) does not sleep again
         (model / "checkpoints").mkdir(parents=True)
+        (model / "run_status.json").write_text(json.dumps({{"status": "running", "iteration": 7,
+            "total_iterations": int(a.iterations), "num_gaussians": 123, "updated": "now"}}))
         time.sleep(float(os.environ.get("FAKE_SLEEP", "0")))
     import math  # closed-form counts written out here (importing the active package would import torch)
     def step_count(method, m, k, eps):

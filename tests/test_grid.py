@@ -205,6 +205,22 @@ def test_uncertainty_rerun_adds_the_maps_to_finished_runs(tmp_path):
     assert r.returncode == 0 and "0 to run" in r.stdout and not log.exists(), r.stdout
 
 
+def test_running_jobs_report_their_progress(tmp_path):
+    """--progress_every S: a line per running job with the iteration and Gaussian count its run_status.json holds,
+    also kept in grid_status.json."""
+    env, python, data, log = make_fake(tmp_path)
+    out = tmp_path / "out"
+    r = grid("--setup", "setup1", "--data", str(data), "--scenes", "ship", "--methods", "random", "--out", str(out),
+             "--python", str(python), "--iter_scale", "0.01", "--launcher", "local", "--progress_every", "0.3",
+             env={**env, "FAKE_SLEEP": "2"})
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "running ship/random/seed0: iteration 7/110, 123 Gaussians (as of now)" in r.stdout, r.stdout
+    job = json.loads((out / "setup1" / "grid_status.json").read_text())["jobs"][0]
+    assert job["state"] == "done" and job["progress"]["iteration"] == 7
+    r = grid("--setup", "setup1", "--data", str(data), "--progress_every", "0", env=env)
+    assert r.returncode == 2 and "--progress_every must be a number > 0" in r.stderr
+
+
 def test_runs_made_with_other_flags_are_refused(tmp_path):
     """A run directory from before the grid (no grid.json) whose cfg_args differ from what the grid would pass."""
     import train

@@ -63,11 +63,11 @@ def test_pixel_box_holds_every_reachable_pixel_and_little_else():
         dx, dy = px - mx, py - my
         power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
         ys, xs = torch.nonzero(power >= cut, as_tuple=True)
-        x_lo, x_hi, y_lo, y_hi = box(mx, my, ca, cb, cc, cut, tile)
+        got = x_lo, x_hi, y_lo, y_hi = box(mx, my, ca, cb, cc, cut, tile)
         hx, hy = math.sqrt(-2 * cut) * sx, math.sqrt(-2 * cut) * sy
         expect = (max(0, math.ceil(mx - hx - 0.5)), min(tile - 1, math.floor(mx + hx - 0.5)),
                   max(0, math.ceil(my - hy - 0.5)), min(tile - 1, math.floor(my + hy - 0.5)))
-        assert all(abs(a - b) <= 1 for a, b in zip((x_lo, x_hi, y_lo, y_hi), expect)), ((x_lo, x_hi, y_lo, y_hi), expect)
+        assert all(abs(a - b) <= 1 for a, b in zip(got, expect)), (got, expect)
         if len(xs):
             nonempty += 1
             assert x_lo <= xs.min() and xs.max() <= x_hi and y_lo <= ys.min() and ys.max() <= y_hi

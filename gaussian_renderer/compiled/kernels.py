@@ -5,8 +5,9 @@ runs of the depth-sorted Gaussians), and works one pixel at a time, as the CUDA 
 the tile's depth-sorted list and updates the tile's pixels, so nothing is padded and a tile stops as soon as all
 its pixels are finished. A kernel "tile" is a block of whole binning tiles (`ops.BLOCK_PIXELS`); a pair visits
 only the pixels of its reach box (`_pixel_box`: the ellipse where alpha >= alpha_min can hold) clipped to its
-tile rectangle (`rects`, pixels), so the block size changes the work, never the pixels a Gaussian touches. All arrays are float64 (one compiled specialisation; the wrappers in
-`gaussian_renderer.compiled.ops` convert), per-Gaussian sums go to one buffer per slice, added up at the end.
+tile rectangle (`rects`, pixels), so the block size changes the work, never the pixels a Gaussian touches. All
+arrays are float64 (one compiled specialisation; the wrappers in `gaussian_renderer.compiled.ops` convert),
+per-Gaussian sums go to one buffer per slice, added up at the end.
 
 Compositing rules (identical to `gaussian_renderer.rasterize`): a pair is skipped where power > 0 or
 alpha = min(alpha_max, o exp(power)) < alpha_min; a pixel stops before the pair that would take its

@@ -26,7 +26,7 @@ BLOCK_PIXELS = 16  # side of the pixel blocks the kernels work on (measured: 8-1
 class CompiledBins:
     """Per-block depth-sorted Gaussian lists in CSR form, and each Gaussian's reach in pixels.
 
-    The kernels work on blocks of `block` x `block` pixels (whole tiles, `block_tiles` per side) while a Gaussian
+    The kernels work on blocks of `block` x `block` pixels (whole tiles, `BLOCK_PIXELS` or less) while a Gaussian
     still reaches exactly the pixels of its tile rectangle (`tile_ranges` at `settings.tile_size`): `rects` clips it,
     so the images equal the torch path's at the same tile size whatever the block.
     """

@@ -24,7 +24,8 @@ log = logging.getLogger(__name__)
 THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")  # torch, BLAS and numba thread pools
 
 
-def _read_json(path: Path) -> Any:
+def read_json(path: Path) -> Any:
+    """The parsed file, or None when it is missing, unreadable or not valid JSON."""
     try:
         return json.loads(path.read_text())
     except (OSError, ValueError):
@@ -33,7 +34,7 @@ def _read_json(path: Path) -> Any:
 
 def trained_iteration(model_dir: Path) -> int | None:
     """The final iteration when run_status.json says the training is complete, else None."""
-    status = _read_json(model_dir / "run_status.json")
+    status = read_json(model_dir / "run_status.json")
     if isinstance(status, dict) and status.get("status") == "complete":
         return int(status.get("iteration", -1))
     return None
@@ -43,7 +44,7 @@ def is_finished(model_dir: Path, uncertainty: bool = False) -> bool:
     """Trained, rendered and scored: results.json holds the final iteration's entry (with `uncertainty`, one that
     carries the uncertainty metrics)."""
     iteration = trained_iteration(model_dir)
-    results = _read_json(model_dir / "results.json")
+    results = read_json(model_dir / "results.json")
     entry = results.get(f"ours_{iteration}") if iteration is not None and isinstance(results, dict) else None
     return isinstance(entry, dict) and (not uncertainty or "AUSE" in entry)
 

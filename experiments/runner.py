@@ -7,7 +7,6 @@ grid.json (the flags the runs were made with), grid_status.json (every job's sta
 from __future__ import annotations
 
 import fcntl
-import json
 import logging
 import os
 import shlex
@@ -18,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from experiments.jobs import GridJob, JobSpec, error_line, is_finished
+from experiments.jobs import GridJob, JobSpec, error_line, is_finished, read_json
 from experiments.protocols import PROTOCOLS, RunScale, RunSpec
 from utils.errors import UserError
 from utils.io import write_json
@@ -97,7 +96,7 @@ def train_command(spec: JobSpec) -> str:
 
 def check_flags(cfg: GridConfig, specs: list[JobSpec]) -> None:
     """Refuse an output directory holding runs made with other flags (grid.json, then each run's cfg_args)."""
-    record = _read_json(cfg.setup_dir / RECORD)
+    record = read_json(cfg.setup_dir / RECORD)
     if isinstance(record, dict):
         for key, value in cfg.record().items():
             if key in record and record[key] != value:
@@ -112,7 +111,7 @@ def check_flags(cfg: GridConfig, specs: list[JobSpec]) -> None:
     from active.registry import list_selectors, selector_options
     any_selector_option = {o for m in list_selectors() for o in selector_options(m)}
     for spec, run in started:
-        saved = _read_json(Path(spec.model_dir) / "cfg_args")
+        saved = read_json(Path(spec.model_dir) / "cfg_args")
         if not isinstance(saved, dict):
             continue  # unreadable: train.py itself reports it
         expected = train.parse_config([*spec.train_args, "--device", "cpu"]).to_dict()
@@ -131,13 +130,6 @@ def check_flags(cfg: GridConfig, specs: list[JobSpec]) -> None:
 
 def _show(value: Any) -> str:
     return shlex.join(value) if isinstance(value, list) else str(value)
-
-
-def _read_json(path: Path) -> Any:
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
 
 
 def lock_held(spec: JobSpec) -> bool:
@@ -214,7 +206,7 @@ class Tracker:
         for job in self.jobs.values():
             if job["state"] != "running":
                 continue
-            status = _read_json(Path(job["model_dir"]) / "run_status.json")
+            status = read_json(Path(job["model_dir"]) / "run_status.json")
             if not (isinstance(status, dict) and status.get("status") == "running" and "iteration" in status):
                 continue
             job["progress"] = {k: status.get(k) for k in ("iteration", "total_iterations", "num_gaussians",

@@ -1,7 +1,8 @@
 """Generated candidate poses: an orbit or a hemisphere of N cameras around the captured views' look-at point.
 
 The frame comes from the captured cameras: centre = the point their optical axes pass closest to
-(`look_at_point`), radius = their mean distance to it, "up" = their mean up vector (-y of the OpenCV camera).
+(`look_at_point`), radius = their mean distance to it, "up" = their mean up vector (-y of the OpenCV camera),
+snapped to the nearest world axis when within `AXIS_SNAP_DEG` of it (cameras looking down tilt the mean).
 Elevations are measured from the plane through the centre perpendicular to up.
 
 * `orbit:N` -- N azimuths evenly spaced; elevation the captured views' mean, or spread evenly over `elevation`
@@ -24,6 +25,7 @@ from scene.cameras import Camera, look_at
 from utils.errors import UserError
 
 HEMISPHERE_ELEVATION = (0.0, 80.0)  # degrees
+AXIS_SNAP_DEG = 30.0  # a mean up within this angle of a world axis is snapped to the axis
 MAX_ELEVATION = 89.0  # |elevation| above this would make "up" parallel to the viewing direction
 
 
@@ -44,7 +46,12 @@ class CaptureFrame:
         if up.norm() < 1e-9 or radius <= 0:
             raise UserError("the captured cameras give no up direction or distance to generate poses around; "
                             "pass a candidate file instead")
-        return cls(center, radius, up / up.norm())
+        up = up / up.norm()
+        axis = torch.zeros(3, dtype=torch.float64)
+        axis[int(up.abs().argmax())] = float(up[int(up.abs().argmax())].sign())
+        if float(up @ axis) >= math.cos(math.radians(AXIS_SNAP_DEG)):
+            up = axis  # cameras looking down at the centre tilt the mean up; a nearby world axis is the intent
+        return cls(center, radius, up)
 
     def elevations(self, cameras: list[Camera]) -> torch.Tensor:
         """Elevation of each camera above the centre's horizontal plane, degrees. [C]"""

@@ -213,7 +213,8 @@ def summary_lines(record: dict[str, Any]) -> list[str]:
     lines = []
     for p in record["picks"]:
         pos = p["c2w"]
-        gain = "n/a" if p["gain"] is None or math.isnan(p["gain"]) else f"{p['gain']:.4g}"
+        gain = ("n/a (no oracle)" if record["oracle_calls"]["evaluated"] == 0 or p["gain"] is None
+                or math.isnan(p["gain"]) else f"{p['gain']:.4g}")
         lines.append(f"pick {p['rank']}: {p['name']} (candidate {p['candidate']}) gain {gain} at "
                      f"({pos[0][3]:.3f}, {pos[1][3]:.3f}, {pos[2][3]:.3f})")
     return lines

@@ -48,16 +48,22 @@ def cameras(count=6):
 NAMES = ["means", "quats", "log_scales", "logit_opacities", "sh_dc"]
 
 
+def reference_image(cam, means, quats, log_scales, logit_opacities, sh_dc, sh_rest):
+    """The image of raw parameters (the model's activations written out: exp, sigmoid, SH dc + rest, degree 1)
+    through projection, SH and the dense reference compositing, all plain autograd (no rasterizer backend). [3,H,W]"""
+    proj = project_gaussians(means, quats, torch.exp(log_scales), cam.viewmat, cam.intrinsics, W, H)
+    colors = sh_to_colors(torch.cat([sh_dc, sh_rest], dim=1), means, camera_center(cam.viewmat), 1)
+    return rasterize_reference(proj.means2d, proj.conics, torch.sigmoid(logit_opacities), colors, proj.depths,
+                               proj.radii, W, H, BG, settings("torch"))[0]
+
+
 def bruteforce_blocks(model, cam, sigma=1.0):
     """sigma^-2 J_i^T J_i per Gaussian from the full autograd Jacobian of the image rendered by the dense reference
     (every pixel and channel w.r.t. every raw parameter), its per-Gaussian diagonal blocks. [N, 14, 14]"""
     sh_rest = model.params["sh_rest"].detach()
 
-    def image(means, quats, log_scales, logit_opacities, sh_dc):  # the model's activations, written out
-        proj = project_gaussians(means, quats, torch.exp(log_scales), cam.viewmat, cam.intrinsics, W, H)
-        colors = sh_to_colors(torch.cat([sh_dc, sh_rest], dim=1), means, camera_center(cam.viewmat), 1)
-        return rasterize_reference(proj.means2d, proj.conics, torch.sigmoid(logit_opacities), colors, proj.depths,
-                                   proj.radii, W, H, BG, settings("torch"))[0]  # dense: no backend
+    def image(means, quats, log_scales, logit_opacities, sh_dc):
+        return reference_image(cam, means, quats, log_scales, logit_opacities, sh_dc, sh_rest)
 
     jac = torch.autograd.functional.jacobian(image, tuple(model.params[k].detach() for k in NAMES), vectorize=True)
     n = model.num_gaussians

@@ -320,6 +320,9 @@ def test_inline_launcher(tmp_path):
             for c in calls(log, "train.py")} == {("1", "15", "4")}
 
 
+# Slow: the runner's layout, skip/resume and summary are covered with the fake CLIs above, and train.py ->
+# render.py -> metrics.py by tests/test_train_e2e.py::test_train_render_metrics.
+@pytest.mark.slow
 def test_tiny_grid_end_to_end_local(tiny_scene, tmp_path):
     """2 methods x 2 seeds through the real train.py, render.py and metrics.py, two jobs at a time."""
     out = tmp_path / "out"

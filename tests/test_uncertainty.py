@@ -78,6 +78,9 @@ def test_recorded_train_views(tmp_path):
     assert recorded_train_views(tmp_path, 90, 9, "coverage") == [0, 5, 2, 7]
 
 
+# Slow (a training run, then render.py --uncertainty and metrics.py in subprocesses): the per-Gaussian variance
+# and the composited map are checked above, the CLIs' pipeline by tests/test_train_e2e.py.
+@pytest.mark.slow
 def test_render_uncertainty_then_metrics(tiny_scene, tmp_path):
     model = tmp_path / "m"
     r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(model), "--eval", "--iterations", "30",

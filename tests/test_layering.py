@@ -159,15 +159,12 @@ def test_imports_follow_the_documented_layers():
     assert not violations, "imports against the layer order of docs/ARCHITECTURE.md:\n" + "\n".join(violations)
 
 
-def test_the_graph_sees_project_imports_of_every_form():
-    """The reader finds the edges a regression would add: absolute, from-imports of a module or a name, function-
-    level imports; and nothing for the standard library or third-party packages."""
-    _, edges = import_edges(ROOT)
-    found = {(e.source, e.target) for e in edges}
-    assert ("gaussian_renderer.rasterize", "gaussian_renderer.compiled.ops") in found  # inside rasterize()
-    assert ("gaussian_renderer.fisher_partials", "gaussian_renderer.tiles") in found  # from module import names
-    assert ("active.fisher", "gaussian_renderer") in found  # from package import names (its __init__)
-    assert ("tests.test_layering", "ast") not in found and not any(e.target.startswith("torch") for e in edges)
+def test_the_reader_sees_the_project():
+    """Guards against a check that passes because it reads nothing (wrong root, a parse that finds no imports)."""
+    modules, edges = import_edges(ROOT)
+    assert "tests.test_layering" in modules and "gaussian_renderer.rasterize" in modules
+    assert len(edges) > len(modules)  # the project's modules import each other a lot
+    assert {e.source.split(".")[0] for e in edges} >= set(read_layers(ARCHITECTURE.read_text())) - {"arguments", "utils"}
 
 
 @pytest.fixture
@@ -193,6 +190,9 @@ def bad_tree(tmp_path: Path) -> Path:
 
 def test_the_checks_catch_cycles_and_imports_up_the_layers(bad_tree):
     _, edges = import_edges(bad_tree)
+    assert {(e.source, e.target) for e in edges} == {  # no edge for the standard library (os)
+        ("low.a", "low.b"), ("low.b", "low.a"), ("low.c", "low.d"), ("low.d", "low.c"), ("low.up", "high.top"),
+        ("high.top", "low.a"), ("script", "high"), ("low.uses_script", "script")}
     assert import_cycles(edges) == [["low.a", "low.b"], ["low.c", "low.d"]]
     layers = read_layers("# x\n## Layers\n1. `low`\n2. `high`: text with `code`\n## Next\n3. `script`\n")
     assert layers == {"low": 1, "high": 2}

@@ -3,7 +3,7 @@
 With the default `MAX_CHUNK_PAIRS` every test image fits in one group, so these tests shrink the bound to a few
 tiles per group: the image, the gradients and the Gram matrix must still equal the dense reference's.
 """
-import sys
+import importlib
 
 import pytest
 import torch
@@ -13,12 +13,12 @@ from gaussian_renderer.reference import rasterize_reference
 from tests.test_attribute_partials import HEIGHT, WIDTH, dense_jacobian, small_scene
 from tests.test_rasterize import BG, _grads, _run, random_2d_scene
 
-CHUNK_ENGINE = "gaussian_renderer.rasterize"  # the module whose MAX_CHUNK_PAIRS bounds the torch path's groups
+CHUNK_ENGINE = "gaussian_renderer.tiles"  # the module whose MAX_CHUNK_PAIRS bounds the torch path's groups
 
 
 def limit_chunk_pairs(monkeypatch, pairs: int) -> None:
     """Bound the torch path's pixel-Gaussian pairs per group to `pairs` for this test."""
-    module = sys.modules[CHUNK_ENGINE]  # by name: the package re-exports `rasterize` under the module's name
+    module = importlib.import_module(CHUNK_ENGINE)
     assert hasattr(module, "MAX_CHUNK_PAIRS"), f"{CHUNK_ENGINE} has no MAX_CHUNK_PAIRS; retarget CHUNK_ENGINE"
     monkeypatch.setattr(module, "MAX_CHUNK_PAIRS", pairs)
 

@@ -1,4 +1,5 @@
-"""Shared test set-up: repository root on sys.path, the shared data directory, tiny generated datasets."""
+"""Shared test set-up: the shared data directory, tiny generated datasets, running the CLIs (the repository root is
+on the import path through pytest.ini's `pythonpath`, the editable install for everything else)."""
 from __future__ import annotations
 
 import os
@@ -10,8 +11,6 @@ import pytest
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 SHARED = Path(os.environ.get("LITEGS_SHARED", ROOT.parent / "shared"))
 

@@ -23,7 +23,7 @@ from statistics import mean, stdev
 
 from utils.errors import UserError
 from utils.io import atomic_write
-from utils.model_dir import CAMERAS, CFG_ARGS, RESULTS, RUN_STATUS, SELECTION
+from utils.model_dir import CAMERAS, CFG_ARGS, METHOD_PATTERN, RESULTS, RUN_STATUS, SELECTION
 
 log = logging.getLogger(__name__)
 MARKERS = (SELECTION, RUN_STATUS, CFG_ARGS)  # any of these makes a directory a run
@@ -95,7 +95,7 @@ def load_run(model: Path) -> Run:
     cameras = _read_json(model / CAMERAS) if (model / CAMERAS).is_file() else None
     run.cameras = cameras if isinstance(cameras, list) else []
     results = _read_json(model / RESULTS) if (model / RESULTS).is_file() else None
-    entries = {k: v for k, v in (results or {}).items() if re.fullmatch(r"ours_\d+", k) and isinstance(v, dict)}
+    entries = {k: v for k, v in (results or {}).items() if METHOD_PATTERN.fullmatch(k) and isinstance(v, dict)}
     if (model / SELECTION).is_file() and not isinstance(sel, dict):
         run.problem = "no readable selection.json (truncated or not valid JSON)"
     elif entries:

@@ -19,14 +19,14 @@ import numpy as np  # noqa: E402
 
 from utils.errors import UserError, run_cli  # noqa: E402
 from utils.metrics_core import method_dirs, read_rgb  # noqa: E402
-from utils.model_dir import PER_VIEW  # noqa: E402
+from utils.model_dir import PER_VIEW, method_name  # noqa: E402
 
 
 def make_figure(model: Path, view: int, out: Path, iteration: int | None = None) -> Path:
     """Write the four-panel PNG of test view `view` to `out`; returns `out`."""
     dirs = method_dirs(model)
     if iteration is not None:
-        dirs = [d for d in dirs if d.name == f"ours_{iteration}"]
+        dirs = [d for d in dirs if d.name == method_name(iteration)]
     if not dirs:
         raise UserError(f"{model}: no test/ours_N renders{'' if iteration is None else f' for {iteration}'}; "
                         "run render.py --uncertainty first")

@@ -12,6 +12,7 @@
 """
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 CFG_ARGS = "cfg_args"
@@ -23,6 +24,7 @@ RESULTS = "results.json"
 PER_VIEW = "per_view.json"
 POINT_CLOUD_DIR = "point_cloud"
 CHECKPOINTS_DIR = "checkpoints"
+METHOD_PATTERN = re.compile(r"ours_(\d+)")  # `method_name`: render folders and results.json keys
 
 
 def iteration_dir_name(iteration: int) -> str:

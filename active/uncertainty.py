@@ -19,7 +19,7 @@ from pathlib import Path
 
 import torch
 
-from active.fisher import FISHER_PARAM_GROUPS, fisher_view_blocks, parameter_columns
+from active.fisher import FISHER_PARAM_GROUPS, fisher_view_blocks, parameter_columns, summed_views
 from active.logdet import BlockInformation
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
@@ -34,10 +34,8 @@ def gaussian_uncertainty(gaussians: GaussianModel, cameras: list[Camera], train_
                          param_groups: str = "default") -> torch.Tensor:
     """u_i = trace of the means block of (H_train,i + delta_i I)^-1 for every Gaussian. [N] float64"""
     groups = FISHER_PARAM_GROUPS[param_groups]
-    prior = None
-    for v in train_views:
-        blocks = fisher_view_blocks(gaussians, cameras[v], background, settings, sigma, groups)
-        prior = blocks if prior is None else prior.add_(blocks)
+    prior = summed_views(lambda v: fisher_view_blocks(gaussians, cameras[v], background, settings, sigma, groups),
+                         train_views)
     information = BlockInformation(prior, delta_rel=delta_rel, delta_abs=delta_abs)
     covariance = torch.cholesky_inverse(information.chol)  # A^-1 [N, P, P]
     means = parameter_columns(gaussians, groups)["means"]

@@ -17,11 +17,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from active.oracle_counts import mean_rounded_up  # noqa: E402
+
 
 def _per_step(runs, kind: str = "conservative") -> int | None:
     """Oracle evaluations per step over all steps of `runs`, rounded up."""
     counts = [s["oracle_calls"][kind] for r in runs for s in r.stages if "oracle_calls" in s]
-    return math.ceil(sum(counts) / len(counts)) if counts else None
+    return mean_rounded_up(counts) if counts else None
 
 
 def _label_axes(ax, xlabel: str, ylabel: str, title: str, legend_size: int) -> None:

@@ -14,13 +14,13 @@ from __future__ import annotations
 import csv
 import json
 import logging
-import math
 import re
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 from statistics import mean, stdev
 
+from active.oracle_counts import exhaustive_count, mean_rounded_up
 from utils.errors import UserError
 from utils.io import atomic_write
 from utils.model_dir import CAMERAS, CFG_ARGS, METHOD_PATTERN, RESULTS, RUN_STATUS, SELECTION
@@ -134,7 +134,7 @@ def mean_std(values: list[float]) -> tuple[float | None, float | None]:
 def per_step_count(runs: list[Run], kind: str) -> int | None:
     """Oracle evaluations per acquisition step, averaged over all steps of the runs, rounded up (the paper's way)."""
     counts = [s["oracle_calls"][kind] for r in runs for s in r.stages if "oracle_calls" in s]
-    return math.ceil(sum(counts) / len(counts)) if counts else None
+    return mean_rounded_up(counts) if counts else None
 
 
 def quality_rows(runs: list[Run]) -> list[dict]:
@@ -160,10 +160,9 @@ def quality_rows(runs: list[Run]) -> list[dict]:
     return rows
 
 
-def exhaustive_count(stage: dict) -> int:
+def stage_exhaustive_count(stage: dict) -> int:
     """What exhaustive greedy (every remaining candidate at every pick) evaluates in a step: sum_{j<k} (M - j)."""
-    m, k = int(stage.get("candidates", 0)), len(stage.get("selected", []))
-    return sum(m - j for j in range(k))
+    return exhaustive_count(int(stage.get("candidates", 0)), len(stage.get("selected", [])))
 
 
 def oracle_rows(runs: list[Run]) -> list[dict]:
@@ -177,8 +176,8 @@ def oracle_rows(runs: list[Run]) -> list[dict]:
     for (setup, scene, k), by_method in sorted(groups.items()):
         for (method, options), group in sorted(by_method.items()):
             cons, evaluated = per_step_count(group, "conservative"), per_step_count(group, "evaluated")
-            steps = [exhaustive_count(s) for r in group for s in r.stages if "oracle_calls" in s]
-            exhaustive = math.ceil(sum(steps) / len(steps)) if steps else None
+            steps = [stage_exhaustive_count(s) for r in group for s in r.stages if "oracle_calls" in s]
+            exhaustive = mean_rounded_up(steps) if steps else None
             reduction = 100.0 * (1.0 - cons / exhaustive) if exhaustive and cons is not None else None
             rows.append({"setup": setup, "scene": scene, "K": k, "method": method, "options": options,
                          "runs": len(group), "steps": sum(len(r.stages) for r in group), "conservative": cons,

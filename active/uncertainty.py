@@ -25,6 +25,7 @@ from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 from utils.errors import UserError
+from utils.model_dir import SELECTION
 
 
 def gaussian_uncertainty(gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
@@ -62,7 +63,7 @@ def recorded_train_views(model_path: Path, iteration: int, num_train: int, metho
             raise UserError(f"{model_path}: the scene has no training cameras, so no training views to take the "
                             "uncertainty from")
         return list(range(num_train))
-    path = model_path / "selection.json"
+    path = model_path / SELECTION
     try:
         selection = json.loads(path.read_text())
         stages, final = selection["stages"], selection.get("final")

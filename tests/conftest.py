@@ -1,5 +1,6 @@
-"""Shared test set-up: repository root on sys.path, the shared data directory, tiny generated datasets, and a
-guard that fails any test reaching the rasterizer with backend="auto" unless it opts in."""
+"""Shared test set-up: the shared data directory, tiny generated datasets, running the CLIs (the repository root is
+on the import path through pytest.ini's `pythonpath`, the editable install for everything else), and a guard that
+fails any test reaching the rasterizer with backend="auto" unless it opts in."""
 from __future__ import annotations
 
 import importlib
@@ -13,8 +14,6 @@ import pytest
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 SHARED = Path(os.environ.get("LITEGS_SHARED", ROOT.parent / "shared"))
 

@@ -1,5 +1,5 @@
 """Plots of experiment runs (matplotlib, Agg backend): test PSNR vs views, oracle evaluations vs K, the eps
-trade-off, and the cameras each method chose. Each function takes the `Run` records of scripts/summarize.py
+trade-off, and the cameras each method chose. Each function takes the `Run` records of experiments/summary.py
 (attributes: setup, scene, method, k, options, options_label, seed, setting, stages, final, results, cameras),
 writes one PNG and returns its path, or returns None when the runs hold nothing to plot. No selector names here:
 series are labelled by method and options as the runs record them."""

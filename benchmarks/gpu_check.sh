@@ -3,7 +3,7 @@
 # the paper-scale lite_gs and pop_gs slices. Writes 8 files to OUTDIR (default $OUT, else gpu_results/):
 #   gpu_check.log  summary.md  pytest.txt  syncs.txt  bench_gpu.json  bench_gpu.md  slice_lite_gs.json  slice_pop_gs.json
 #
-#   bash benchmarks/gpu_prepare.sh                           # here, once: wheels + data link (see README "GPU")
+#   bash benchmarks/gpu_prepare.sh                           # here, once: wheels + data link (see docs/gpu.md)
 #   bash benchmarks/gpu_check.sh [OUTDIR]                    # on the GPU machine
 #   GPU_CHECK_DEVICE=cpu bash benchmarks/gpu_check.sh /tmp/x # dry run of the plumbing on a CPU (tiny sizes)
 #
@@ -27,6 +27,8 @@ fi
 mkdir -p "$OUTDIR"
 LOG="$OUTDIR/gpu_check.log"
 export PYTHONUNBUFFERED=1
+# The device machine's python has no editable install of the project (scripts/setup_env.sh): import it from here.
+export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}"
 START=$SECONDS
 left() { echo $((TOTAL_S - (SECONDS - START))); }
 say() { echo "[$((SECONDS - START)) s] $*" | tee -a "$LOG"; }

@@ -33,6 +33,7 @@ from scene.gaussian_model import GaussianModel
 from scene.pose_files import read_pose_file, scaled_camera
 from scene.resolution_policy import CUDA_MAX_WIDTH
 from scene.trained import background_color, find_iteration, load_model_config, raster_settings
+from utils import model_dir
 from utils.errors import UserError
 
 log = logging.getLogger(__name__)
@@ -78,17 +79,16 @@ def load_model(model: str | Path, captured: str | Path | None = None, *, iterati
 def _load_model_dir(path: Path, iteration: int, device: str) -> LoadedModel:
     model_cfg, pipeline_cfg = load_model_config(path)
     iteration = find_iteration(path, iteration)
-    saved = json.loads((path / "cfg_args").read_text())
+    saved = json.loads((path / model_dir.CFG_ARGS).read_text())
     active, dataset = saved.get("active", {}), saved.get("dataset")
     if not isinstance(dataset, dict) or "num_test" not in dataset:
-        raise UserError(f"{path}/cfg_args records no dataset split (num_test); retrain the model with this train.py")
-    cameras_json = path / "cameras.json"
+        raise UserError(f"{path / model_dir.CFG_ARGS} records no dataset split (num_test); retrain the model with this train.py")
+    cameras_json = path / model_dir.CAMERAS
     if not cameras_json.is_file():
-        raise UserError(f"{path} has no cameras.json; retrain the model or restore the file")
+        raise UserError(f"{path} has no {model_dir.CAMERAS}; retrain the model or restore the file")
     cameras = [c.to(device) for c in read_pose_file(cameras_json)[dataset["num_test"]:]]  # test first, then train
     train_ids = recorded_train_views(path, iteration, len(cameras), active.get("method", ""))
-    gaussians = GaussianModel.load_ply(path / "point_cloud" / f"iteration_{iteration}" / "point_cloud.ply",
-                                       device=device)
+    gaussians = GaussianModel.load_ply(model_dir.point_cloud_ply(path, iteration), device=device)
     gaussians.active_sh_degree = min(iteration // SH_DEGREE_EVERY, gaussians.max_sh_degree)  # as when trained
     defaults = FisherSettings()
     fisher = FisherSettings(active.get("sigma", defaults.sigma), active.get("delta_rel", defaults.delta_rel),

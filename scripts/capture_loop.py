@@ -29,6 +29,7 @@ from active.recommend_outputs import write_outputs
 from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions, make_builtin_scene, render_rgba, scene_gaussians
 from scene.cameras import look_at
 from scene.frames import GL_TO_CV
+from utils import model_dir
 from utils.errors import run_cli
 from utils.image import save_image
 from utils.io import write_json
@@ -57,7 +58,7 @@ def train(dataset: Path, model: Path, iterations: int, seed: int, max_gaussians:
            str(iterations), "--seed", str(seed), "--max_gaussians", str(max_gaussians), "--quiet", "--overwrite",
            "--densify_from_iter", "100", "--densification_interval", "50"]
     subprocess.run(cmd, check=True, cwd=root, capture_output=True, text=True)
-    return json.loads((model / "run_status.json").read_text())["test_psnr"]
+    return json.loads((model / model_dir.RUN_STATUS).read_text())["test_psnr"]
 
 
 def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dict:
@@ -76,8 +77,8 @@ def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dic
     while True:
         write_json(dataset / "transforms_train.json", {"camera_angle_x": CAMERA_ANGLE_X, "frames": frames})
         t0 = time.perf_counter()
-        model_dir = out / "model"
-        psnr = train(dataset, model_dir, args.iters_per_view * len(frames), seed, args.max_gaussians)
+        model_path = out / "model"
+        psnr = train(dataset, model_path, args.iters_per_view * len(frames), seed, args.max_gaussians)
         train_s = time.perf_counter() - t0
         record = {"views": len(frames), "test_psnr": psnr, "train_seconds": train_s}
         rounds.append(record)
@@ -85,7 +86,7 @@ def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dic
         if len(frames) >= args.budget:
             break
         t0 = time.perf_counter()
-        model = load_model(model_dir)
+        model = load_model(model_path)
         pool = make_pool(model, candidate_cameras(f"hemisphere:{args.candidates}", model))
         k = min(args.k, args.budget - len(frames))
         rec = recommend(model, pool, build_selector(method), k, seed=seed * 1000 + len(rounds))

@@ -90,6 +90,7 @@ def test_same_picks_as_train_py_and_no_image_is_read(tiny_scene, tmp_path):
         assert torch.allclose(torch.tensor(f["transform_matrix"], dtype=torch.float64), c2w_cv @ flip)
 
 
+@pytest.mark.auto_backend
 def test_foreign_graphdeco_ply_loads_and_is_ranked(tmp_path):
     ply = tmp_path / "splat.ply"
     cols = _graphdeco_ply(ply, degree=1)
@@ -143,6 +144,7 @@ def test_generated_orbit_and_hemisphere_look_at_the_centre():
             assert {round(math.degrees(math.asin(float(c.camera_center[2]) / 3.0)), 3) for c in cams} == {20.0}
 
 
+@pytest.mark.auto_backend
 def test_invisible_candidates_come_last_with_gain_zero(tmp_path):
     ply = tmp_path / "splat.ply"
     _graphdeco_ply(ply, degree=0)

@@ -15,8 +15,11 @@ Approximation (as in the LiTe-GS paper, following FisherRF/POP-GS):
 
 Diagonal variant (FisherRF's approximation): `fisher_view_diagonals` gives diag(H_v) [N, P] from the same Gram and
 projection Jacobian without forming the blocks (diag(J^T G J)_p = sum_ab J_ap G_ab J_bp), over every raw parameter
-group; `DiagonalFisherOracle` serves it to selectors whose `oracle_kind` is "diagonal". `build_oracle(kind, ...)` is
-the one entry point train.py calls, with the kind the selector declares.
+group; `DiagonalFisherOracle` serves it to selectors whose `oracle_kind` is "diagonal". `fisher_view_diagonals_reference`
+reproduces what FisherRF's modified rasterizer computes instead (docs/deviations.md): for geometry and opacity the
+square of the channel-summed pixel partial, and the exp / sigmoid derivative of log_scales / logit_opacities applied
+once after squaring; the oracle kind "diagonal_reference" serves it. `build_oracle(kind, ...)` is the one entry point
+train.py calls, with the kind the selector declares.
 
 `FisherOracle.build(...)` returns the one object the selectors call (`gain`, `commit`, `evaluated`: the
 `GainOracle` protocol, by inheritance from `active.logdet.BlockGainOracle`); its `FisherViewBlocks` supplies the
@@ -41,6 +44,7 @@ from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from gaussian_renderer.sh import sh_to_colors
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
+from utils.errors import UserError
 
 log = logging.getLogger(__name__)
 
@@ -88,6 +92,58 @@ def fisher_view_diagonals(gaussians: GaussianModel, camera: Camera, background: 
     return torch.einsum("nap,nab,nbp->np", jac, gram, jac) / (sigma * sigma)
 
 
+REFERENCE_DIAGONAL_GROUPS = ("means", "log_scales", "logit_opacities", "sh_dc", "sh_rest")  # FisherRF: no rotation
+
+
+def fisher_view_diagonals_reference(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
+                                    settings: RasterSettings, sigma: float = 1.0,
+                                    param_groups: tuple[str, ...] = REFERENCE_DIAGONAL_GROUPS) -> torch.Tensor:
+    """The diagonal FisherRF's code accumulates (`diff/cuda_rasterizer/backward.cu`, `renderCUDAFused` with
+    `atomicAddSquare`, pixel gradient 1 on every channel, then PyTorch's activation backward), per raw parameter:
+
+    * geometry (means, log_scales, logit_opacities): sigma^-2 sum_pixels (sum_channels dI_pc/dtheta)^2, the square
+      of the channel-summed partial, with the activation derivative f'(theta) (exp for log_scales, sigmoid for
+      logit_opacities) applied once after squaring: f' sum_p (sum_c dI_pc/da)^2 instead of f'^2 (...);
+    * colour (sh_dc, sh_rest): as `fisher_view_diagonals` (a coefficient reaches one channel, so both agree).
+
+    The channel-summed partials are those of a one-channel render whose colour is the sum of the three (compositing
+    is linear in colour). Rotation is not reproduced (FisherRF scores without it).
+
+    Returns:
+        float64 diagonals. [N, P]
+    Raises:
+        UserError: "quats" in `param_groups`.
+    """
+    if "quats" in param_groups:
+        raise UserError("the reference (FisherRF-code) Fisher diagonal has no rotation columns; drop quats from "
+                        "--fisherrf_params")
+    jac, gram = _jacobian_and_gram(gaussians, camera, background, settings, param_groups)  # [N, A, P], [N, A, A]
+    exact = torch.einsum("nap,nab,nbp->np", jac, gram, jac)  # per-channel squares [N, P]
+    with torch.no_grad():
+        proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, camera.viewmat,
+                                 camera.intrinsics, camera.width, camera.height)
+        colors = sh_to_colors(gaussians.sh_coeffs, gaussians.means, camera.camera_center, gaussians.active_sh_degree)
+        gram_sum = attribute_gram(proj.means2d, proj.conics, gaussians.opacities, colors.sum(1, keepdim=True),
+                                  proj.depths, proj.radii, camera.width, camera.height,
+                                  background.sum().reshape(1), settings)  # [N, 7, 7] of the channel-summed image
+    lift = torch.zeros(9, 7, dtype=torch.float64, device=gram_sum.device)  # channel-summed partials, 7 -> 9 attributes
+    lift[:6, :6] = torch.eye(6, dtype=torch.float64, device=gram_sum.device)
+    lift[6:, 6] = 1.0  # d(sum_c I_c)/d colour_c' = the blending weight, for every c'
+    summed = torch.einsum("nap,nab,nbp->np", jac, lift @ gram_sum @ lift.T, jac)  # [N, P]
+    columns = parameter_columns(gaussians, param_groups)
+    diag = summed.clone()
+    for group in ("sh_dc", "sh_rest"):
+        if group in columns:
+            diag[:, columns[group]] = exact[:, columns[group]]
+    params = gaussians.params
+    if "log_scales" in columns:  # exp' = exp: f'^2 S -> f' S
+        diag[:, columns["log_scales"]] /= params["log_scales"].detach().double().exp().clamp_min(1e-300)
+    if "logit_opacities" in columns:  # sigmoid' = o (1 - o)
+        o = torch.sigmoid(params["logit_opacities"].detach().double()).reshape(-1, 1)
+        diag[:, columns["logit_opacities"]] /= (o * (1 - o)).clamp_min(1e-300)
+    return diag / (sigma * sigma)
+
+
 def parameter_columns(gaussians: GaussianModel, param_groups: tuple[str, ...]) -> dict[str, slice]:
     """The columns of each parameter group in a Fisher block or diagonal over `param_groups` (their widths from the
     model: means 3, quats 4, log_scales 3, logit_opacities 1, sh_dc 3, sh_rest 3((d+1)^2 - 1))."""
@@ -131,6 +187,7 @@ class FisherViewBlocks:
     streaming: bool
     cache_bytes: int
     diagonal: bool = False  # diagonals [N, P] instead of blocks [N, P, P]
+    reference: bool = False  # with `diagonal`: FisherRF's code's diagonals (`fisher_view_diagonals_reference`)
     views_computed: int = 0  # distinct views whose blocks were computed (candidates; prior views not counted)
     fisher_seconds: float = 0.0  # time spent computing blocks, prior included
     _cache: "OrderedDict[int, torch.Tensor]" = field(default_factory=OrderedDict)
@@ -139,7 +196,8 @@ class FisherViewBlocks:
     def compute(self, view_id: int) -> torch.Tensor:
         """The blocks (or diagonals) of `cameras[view_id]`, timed, never cached. [N, P, P] or [N, P] float64"""
         t0 = time.perf_counter()
-        kernel = fisher_view_diagonals if self.diagonal else fisher_view_blocks
+        kernel = ((fisher_view_diagonals_reference if self.reference else fisher_view_diagonals) if self.diagonal
+                  else fisher_view_blocks)
         blocks = kernel(self.gaussians, self.cameras[view_id], self.background, self.settings,
                                     self.sigma, self.param_groups)
         self.fisher_seconds += time.perf_counter() - t0
@@ -243,11 +301,13 @@ class DiagonalFisherOracle(_ViewStatistics, DiagonalGainOracle):
 
     @classmethod
     def build(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int], background: torch.Tensor,
-              settings: RasterSettings, *, sigma: float = 1.0, mode: str = "cached",
-              cache_mb: int = 0) -> "DiagonalFisherOracle":
-        """The prior diagonal of `train_views` and an oracle over the other views of `cameras`."""
-        source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, RAW_PARAMETER_GROUPS,
-                                  mode == "streaming", _cache_budget(cache_mb), diagonal=True)
+              settings: RasterSettings, *, sigma: float = 1.0, mode: str = "cached", cache_mb: int = 0,
+              reference: bool = False) -> "DiagonalFisherOracle":
+        """The prior diagonal of `train_views` and an oracle over the other views of `cameras` (with `reference`,
+        FisherRF's code's diagonal over `REFERENCE_DIAGONAL_GROUPS`)."""
+        groups = REFERENCE_DIAGONAL_GROUPS if reference else RAW_PARAMETER_GROUPS
+        source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, groups, mode == "streaming",
+                                  _cache_budget(cache_mb), diagonal=True, reference=reference)
         return cls(_prior(source, train_views, len(cameras)), source)
 
 
@@ -256,15 +316,17 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
                  delta_abs: float = 1e-8, param_groups: str = "default", mode: str = "cached",
                  cache_mb: int = 0) -> FisherOracle | DiagonalFisherOracle:
     """The oracle of `kind` (a selector's `oracle_kind`): "logdet" -> `FisherOracle` (ridge and `param_groups`
-    apply), "diagonal" -> `DiagonalFisherOracle` (every raw parameter group, no ridge)."""
+    apply), "diagonal" -> `DiagonalFisherOracle` (every raw parameter group, no ridge), "diagonal_reference" -> the
+    same over FisherRF's code's diagonal (`fisher_view_diagonals_reference`)."""
     if kind == "logdet":
         return FisherOracle.build(gaussians, cameras, train_views, background, settings, sigma=sigma,
                                   delta_rel=delta_rel, delta_abs=delta_abs, param_groups=param_groups, mode=mode,
                                   cache_mb=cache_mb)
-    if kind == "diagonal":
+    if kind in ("diagonal", "diagonal_reference"):
         return DiagonalFisherOracle.build(gaussians, cameras, train_views, background, settings, sigma=sigma,
-                                          mode=mode, cache_mb=cache_mb)
-    raise ValueError(f"unknown oracle kind {kind!r} (a selector's oracle_kind is 'logdet' or 'diagonal')")
+                                          mode=mode, cache_mb=cache_mb, reference=kind == "diagonal_reference")
+    raise ValueError(f"unknown oracle kind {kind!r} (a selector's oracle_kind is 'logdet', 'diagonal' or "
+                     "'diagonal_reference')")
 
 
 def _cache_budget(cache_mb: int) -> int:

@@ -46,7 +46,7 @@ def is_finished(model_dir: Path, uncertainty: bool = False) -> bool:
     iteration = trained_iteration(model_dir)
     results = read_json(model_dir / "results.json")
     entry = results.get(f"ours_{iteration}") if iteration is not None and isinstance(results, dict) else None
-    return isinstance(entry, dict) and (not uncertainty or "AUSE" in entry)
+    return isinstance(entry, dict) and (not uncertainty or "uncertainty_object_region" in entry)
 
 
 def is_rendered(model_dir: Path, iteration: int, uncertainty: bool = False) -> bool:

@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from utils.errors import UserError, run_cli  # noqa: E402
 from utils.io import atomic_write  # noqa: E402
+from utils.metrics_core import REGIONS, UNCERTAINTY_KINDS, uncertainty_key  # noqa: E402
 
 log = logging.getLogger("summarize")
 MARKERS = ("selection.json", "run_status.json", "cfg_args")  # any of these makes a directory a run
@@ -141,10 +142,12 @@ def per_step_count(runs: list[Run], kind: str) -> int | None:
 
 def quality_rows(runs: list[Run]) -> list[dict]:
     """Setup x method setting: PSNR / SSIM / LPIPS mean and std over the complete runs (seeds and scenes), and the
-    uncertainty metrics (Spearman, AUSE) when some run has them (render.py --uncertainty)."""
+    uncertainty metrics when some run has them (render.py --uncertainty): Spearman and AUSE_MAE_norm of every map
+    kind over the image and the object ("METRIC/KIND/REGION", see metrics.py)."""
     metrics = ("PSNR", "SSIM", "LPIPS")
-    if any(r.results is not None and "AUSE" in r.results for r in runs):
-        metrics += ("Spearman", "AUSE")
+    found = {k for r in runs if r.results is not None for k in r.results if k.count("/") == 2}
+    metrics += tuple(uncertainty_key(m, kind, region) for kind in UNCERTAINTY_KINDS for region in REGIONS
+                     for m in ("Spearman", "AUSE_MAE_norm") if uncertainty_key(m, kind, region) in found)
     groups: dict[tuple, list[Run]] = defaultdict(list)
     for r in runs:
         groups[(r.setup, r.setting)].append(r)
@@ -228,7 +231,8 @@ def markdown_table(rows: list[dict], digits: dict[str, int]) -> str:
     head = [c[:-5] if c.endswith("_mean") else c for c in cols]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in cols) + "|"]
     for row in rows:
-        lines.append("| " + " | ".join(_cell(row, c, digits.get(c.split("_")[0], 2)) for c in cols) + " |")
+        lines.append("| " + " | ".join(_cell(row, c, digits.get(c.split("/")[0].split("_")[0], 2)) for c in cols)
+                     + " |")
     return "\n".join(lines) + "\n"
 
 

@@ -24,6 +24,7 @@ from utils.io import write_json
 from utils.lpips_loader import VARIANTS, default_weights_path, load_lpips
 from utils.metrics_core import (REGIONS, UNCERTAINTY_KINDS, Lpips, evaluate_views, find_model_dirs, mean_metrics,
                                 method_dirs, object_region, uncertainty_key, uncertainty_metric_names)
+from utils.model_dir import PER_VIEW, RESULTS
 from utils.uncertainty_metrics import AUSE_VARIANTS, parse_ause_variants
 
 
@@ -57,8 +58,8 @@ def evaluate(model_dirs: list[str | os.PathLike], lpips_weights: str | os.PathLi
             results[method_dir.name] = mean_metrics(per_view, lpips.variant if lpips else None,
                                                     object_region(method_dir))
             per_view_all[method_dir.name] = per_view
-        write_json(model_dir / "results.json", results)
-        write_json(model_dir / "per_view.json", per_view_all)
+        write_json(model_dir / RESULTS, results)
+        write_json(model_dir / PER_VIEW, per_view_all)
         summary[str(model_dir)] = {m: {**r, "num_views": len(per_view_all[m]["PSNR"])} for m, r in results.items()}
     return summary
 

@@ -9,7 +9,7 @@ import torch
 
 from active.fisher import fisher_view_blocks
 from active.logdet import BlockInformation
-from tests.test_fisher_oracle import BG, SETTINGS, cameras, tiny_model
+from tests.test_fisher_oracle import BG, cameras, settings, tiny_model
 from utils.errors import UserError
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -18,7 +18,7 @@ from bench_approximation import check_inputs, subset_rhos  # noqa: E402
 
 def test_subset_rhos_equal_sequential_commits():
     model, cams = tiny_model(seed=3), cameras()
-    blocks = {v: fisher_view_blocks(model, cams[v], BG, SETTINGS) for v in range(6)}
+    blocks = {v: fisher_view_blocks(model, cams[v], BG, settings("compiled")) for v in range(6)}
     prior = blocks[0] + blocks[3]
     rhos = subset_rhos(BlockInformation(prior, delta_rel=1e-6), blocks, [1, 2, 4, 5], 2)
     assert sorted(rhos) == [(1, 2), (1, 4), (1, 5), (2, 4), (2, 5), (4, 5)]

@@ -7,34 +7,33 @@ from active import build_selector
 from active.base import SelectionContext
 from active.fisher import (REFERENCE_DIAGONAL_GROUPS, DiagonalGainOracle, build_oracle, fisher_view_blocks,
                            fisher_view_diagonals, fisher_view_diagonals_reference, parameter_columns)
-from gaussian_renderer import rasterization
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
-from tests.test_fisher_oracle import BG, SETTINGS, W, H, cameras, tiny_model
+from tests.test_fisher_oracle import BG, H, W, cameras, reference_image, settings, tiny_model
 from utils.errors import UserError
 
 
 def bruteforce_diagonals(model, cam, sigma=1.0):
     """sigma^-2 sum over pixels and channels of (dI/dtheta)^2 for every raw parameter, from the full autograd
-    Jacobian of the rendered image, in RAW_PARAMETER_GROUPS order. [N, 3 + 4 + 3 + 1 + 3 + 9]"""
-    def image(means, quats, log_scales, logit_opacities, sh_dc, sh_rest):
-        return rasterization(means, quats, torch.exp(log_scales), torch.sigmoid(logit_opacities),
-                             torch.cat([sh_dc, sh_rest], dim=1), cam.viewmat, cam.intrinsics, W, H, sh_degree=1,
-                             background=BG, settings=SETTINGS).image
+    Jacobian of the image rendered by the dense reference, in RAW_PARAMETER_GROUPS order. [N, 3 + 4 + 3 + 1 + 3 + 9]"""
+    def image(*raw):
+        return reference_image(cam, *raw)
 
-    jac = torch.autograd.functional.jacobian(image, tuple(model.params[k].detach() for k in RAW_PARAMETER_GROUPS))
+    jac = torch.autograd.functional.jacobian(image, tuple(model.params[k].detach() for k in RAW_PARAMETER_GROUPS),
+                                             vectorize=True)
     n = model.num_gaussians
     widths = [model.params[k][0].numel() for k in RAW_PARAMETER_GROUPS]
     j = torch.cat([part.reshape(-1, n, w) for part, w in zip(jac, widths)], dim=2)  # [pixels x channels, N, P]
     return (j ** 2).sum(0) / sigma**2
 
 
-def test_diagonals_equal_bruteforce_and_the_block_diagonals():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_diagonals_equal_bruteforce_and_the_block_diagonals(backend):
     model, cam = tiny_model(seed=1), cameras()[2]
     expected = bruteforce_diagonals(model, cam, sigma=0.5)
-    diag = fisher_view_diagonals(model, cam, BG, SETTINGS, sigma=0.5)
+    diag = fisher_view_diagonals(model, cam, BG, settings(backend), sigma=0.5)
     assert diag.shape == (6, 3 + 4 + 3 + 1 + 3 + 9) and expected[:, 14:].abs().max() > 1e-4  # sh_rest matters
     torch.testing.assert_close(diag, expected, rtol=1e-4, atol=1e-4 * expected.abs().max().item())
-    blocks = fisher_view_blocks(model, cam, BG, SETTINGS, sigma=0.5, param_groups=RAW_PARAMETER_GROUPS)
+    blocks = fisher_view_blocks(model, cam, BG, settings(backend), sigma=0.5, param_groups=RAW_PARAMETER_GROUPS)
     torch.testing.assert_close(diag, torch.diagonal(blocks, dim1=-2, dim2=-1), rtol=1e-10, atol=1e-12)
     cols = parameter_columns(model, RAW_PARAMETER_GROUPS)
     assert cols["quats"] == slice(3, 7) and cols["sh_rest"] == slice(14, 23)
@@ -47,9 +46,8 @@ def bruteforce_reference_diagonals(model, cam, sigma=1.0):
     (dI/dsh)^2. Columns in REFERENCE_DIAGONAL_GROUPS order. [N, 3 + 3 + 1 + 3 + 9]"""
     quats = model.params["quats"].detach()
 
-    def image(means, scales, opacities, sh_dc, sh_rest):
-        return rasterization(means, quats, scales, opacities, torch.cat([sh_dc, sh_rest], dim=1), cam.viewmat,
-                             cam.intrinsics, W, H, sh_degree=1, background=BG, settings=SETTINGS).image
+    def image(means, scales, opacities, sh_dc, sh_rest):  # the dense reference image of the activated parameters
+        return reference_image(cam, means, quats, torch.log(scales), torch.logit(opacities), sh_dc, sh_rest)
 
     log_scales, logits = model.params["log_scales"].detach(), model.params["logit_opacities"].detach()
     inputs = (model.params["means"].detach(), log_scales.exp(), torch.sigmoid(logits),
@@ -63,17 +61,18 @@ def bruteforce_reference_diagonals(model, cam, sigma=1.0):
     return torch.cat(geometry + squares, dim=1) / sigma**2
 
 
-def test_reference_diagonals_equal_fisherrf_code_written_out():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_reference_diagonals_equal_fisherrf_code_written_out(backend):
     model, cam = tiny_model(seed=1), cameras()[2]
     expected = bruteforce_reference_diagonals(model, cam, sigma=0.5)
-    diag = fisher_view_diagonals_reference(model, cam, BG, SETTINGS, sigma=0.5)
+    diag = fisher_view_diagonals_reference(model, cam, BG, settings(backend), sigma=0.5)
     assert diag.shape == expected.shape == (6, 19)
     torch.testing.assert_close(diag, expected, rtol=1e-4, atol=1e-4 * expected.abs().max().item())
-    exact = fisher_view_diagonals(model, cam, BG, SETTINGS, sigma=0.5, param_groups=REFERENCE_DIAGONAL_GROUPS)
+    exact = fisher_view_diagonals(model, cam, BG, settings(backend), sigma=0.5, param_groups=REFERENCE_DIAGONAL_GROUPS)
     torch.testing.assert_close(diag[:, 7:], exact[:, 7:], rtol=1e-10, atol=0.0)  # colour: the two agree
     assert not torch.allclose(diag[:, :7], exact[:, :7], rtol=1e-2)  # geometry and opacity: they differ
     with pytest.raises(UserError, match="rotation"):
-        fisher_view_diagonals_reference(model, cam, BG, SETTINGS, param_groups=("means", "quats"))
+        fisher_view_diagonals_reference(model, cam, BG, settings(backend), param_groups=("means", "quats"))
 
 
 def greedy_reference(diags, train, candidates, k, keep, lam):
@@ -93,13 +92,14 @@ def greedy_reference(diags, train, candidates, k, keep, lam):
 @pytest.mark.parametrize("mode", ["cached", "streaming"])
 @pytest.mark.parametrize("params,lam", [("means,log_scales,logit_opacities,sh_dc,sh_rest", 1e-6),
                                         ("quats,sh_dc", 1e-2)])
-def test_selection_equals_greedy_on_bruteforce_diagonals(mode, params, lam):
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_selection_equals_greedy_on_bruteforce_diagonals(mode, params, lam, backend):
     model, cams = tiny_model(seed=2), cameras()
     diags = [bruteforce_diagonals(model, cam) for cam in cams]
     cols = parameter_columns(model, RAW_PARAMETER_GROUPS)
     keep = torch.cat([torch.arange(cols[g].start, cols[g].stop) for g in params.split(",")])
     ids, scores = greedy_reference(diags, [0, 3], [1, 2, 4, 5], 3, keep, lam)
-    oracle = build_oracle("diagonal", model, cams, [0, 3], BG, SETTINGS, mode=mode)
+    oracle = build_oracle("diagonal", model, cams, [0, 3], BG, settings(backend), mode=mode)
     ctx = SelectionContext([5, 1, 4, 2], oracle, torch.Generator().manual_seed(0), 0)
     sel = build_selector("fisherrf", fisherrf_lambda=lam, fisherrf_params=params).select(ctx, 3)
     assert sel.ids == ids
@@ -111,14 +111,15 @@ def test_selection_equals_greedy_on_bruteforce_diagonals(mode, params, lam):
 
 
 @pytest.mark.parametrize("mode", ["cached", "streaming"])
-def test_reference_variant_equals_greedy_on_bruteforce_reference_diagonals(mode):
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_reference_variant_equals_greedy_on_bruteforce_reference_diagonals(mode, backend):
     model, cams = tiny_model(seed=2), cameras()
     diags = [bruteforce_reference_diagonals(model, cam) for cam in cams]
     keep = torch.arange(diags[0].shape[1])  # the default groups are exactly REFERENCE_DIAGONAL_GROUPS
     ids, scores = greedy_reference(diags, [0, 3], [1, 2, 4, 5], 3, keep, 1e-6)
     selector = build_selector("fisherrf", fisherrf_variant="reference")
     assert selector.oracle_kind == "diagonal_reference"
-    oracle = build_oracle(selector.oracle_kind, model, cams, [0, 3], BG, SETTINGS, mode=mode)
+    oracle = build_oracle(selector.oracle_kind, model, cams, [0, 3], BG, settings(backend), mode=mode)
     sel = selector.select(SelectionContext([5, 1, 4, 2], oracle, torch.Generator().manual_seed(0), 0), 3)
     assert sel.ids == ids
     torch.testing.assert_close(torch.tensor(sel.gains), torch.tensor(scores), rtol=1e-4, atol=0.0)

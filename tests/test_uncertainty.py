@@ -12,7 +12,7 @@ from active.uncertainty import (camera_depths, fisherrf_information, fisherrf_ma
                                 parse_uncertainty_kinds, recorded_train_views, uncertainty_map, view_information)
 from gaussian_renderer import render
 from tests.conftest import run_cli
-from tests.test_fisher_oracle import BG, SETTINGS, bruteforce_blocks, cameras, tiny_model
+from tests.test_fisher_oracle import BG, bruteforce_blocks, cameras, settings, tiny_model
 from tests.test_fisherrf import bruteforce_diagonals, bruteforce_reference_diagonals
 from utils.errors import UserError
 from utils.uncertainty_metrics import ause, average_ranks, spearman
@@ -40,45 +40,50 @@ def test_ause_on_known_arrays():
     assert ause(-errors, errors, bins=4) > ause(np.array([2.0, 1.0, 4.0, 3.0]), errors, bins=4) > 0
 
 
-def test_gaussian_uncertainty_equals_a_dense_inverse_of_bruteforce_blocks():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_gaussian_uncertainty_equals_a_dense_inverse_of_bruteforce_blocks(backend):
     model, cams = tiny_model(seed=3), cameras()
-    u = gaussian_uncertainty(model, cams, [0, 2, 4], BG, SETTINGS, sigma=0.5)
+    u = gaussian_uncertainty(model, cams, [0, 2, 4], BG, settings(backend), sigma=0.5)
     prior = sum(bruteforce_blocks(model, cams[v], sigma=0.5) for v in (0, 2, 4))  # [N, 14, 14]
     a = BlockInformation(prior).matrix  # the same ridge, added to the brute-force prior
     expected = torch.stack([torch.trace(torch.linalg.inv(block)[:3, :3]) for block in a])
     torch.testing.assert_close(u, expected, rtol=1e-3, atol=0.0)
     assert bool((u > 0).all())
-    more = gaussian_uncertainty(model, cams, [0, 1, 2, 3, 4, 5], BG, SETTINGS, sigma=0.5)
+    more = gaussian_uncertainty(model, cams, [0, 1, 2, 3, 4, 5], BG, settings(backend), sigma=0.5)
     assert bool((more <= u * (1 + 1e-6)).all())  # more views: no Gaussian more uncertain
 
 
-def test_uncertainty_map_composites_like_a_colour():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_uncertainty_map_composites_like_a_colour(backend):
     model, cam = tiny_model(seed=1), cameras()[1]
-    alpha = render(cam, model, BG.float(), SETTINGS).alpha
-    torch.testing.assert_close(uncertainty_map(cam, model, torch.full((6,), 2.5), SETTINGS), 2.5 * alpha.float(),
+    raster = settings(backend)
+    alpha = render(cam, model, BG.float(), raster).alpha
+    torch.testing.assert_close(uncertainty_map(cam, model, torch.full((6,), 2.5), raster), 2.5 * alpha.float(),
                                rtol=1e-5, atol=1e-6)
     u1, u2 = torch.rand(6), torch.rand(6)
-    torch.testing.assert_close(uncertainty_map(cam, model, u1 + u2, SETTINGS),
-                               uncertainty_map(cam, model, u1, SETTINGS) + uncertainty_map(cam, model, u2, SETTINGS),
+    torch.testing.assert_close(uncertainty_map(cam, model, u1 + u2, raster),
+                               uncertainty_map(cam, model, u1, raster) + uncertainty_map(cam, model, u2, raster),
                                rtol=1e-5, atol=1e-6)
 
 
-def test_fisherrf_information_and_maps_follow_fisherrfs_recipe():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_fisherrf_information_and_maps_follow_fisherrfs_recipe(backend):
+    raster = settings(backend)
     model, cams = tiny_model(seed=4), cameras()
     expected = sum(bruteforce_diagonals(model, cams[v])[:, 11:].sum(1) for v in (0, 2, 5))  # sh_dc + sh_rest columns
-    info = fisherrf_information(model, cams, [0, 2, 5], BG, SETTINGS)
+    info = fisherrf_information(model, cams, [0, 2, 5], BG, raster)
     torch.testing.assert_close(info, expected, rtol=1e-4, atol=1e-6 * float(expected.max()))
     cam = cams[1]
     view = camera_depths(model, cam)
     manual = (model.means.detach() @ cam.viewmat[:3, :3].T + cam.viewmat[:3, 3])[:, 2]
     torch.testing.assert_close(view, manual)
-    drawn = uncertainty_map(cam, model, info * view.clamp_min(0), SETTINGS)
-    m = fisherrf_map(cam, model, info, SETTINGS)
+    drawn = uncertainty_map(cam, model, info * view.clamp_min(0), raster)
+    m = fisherrf_map(cam, model, info, raster)
     empty = drawn == 0
     assert empty.any() and (~empty).any()
     torch.testing.assert_close(m[~empty], drawn[~empty])
     assert bool((m[empty] == drawn.max()).all())  # nothing drawn: as uncertain as the most uncertain pixel
-    own = view_information(model, cam, BG, SETTINGS)
+    own = view_information(model, cam, BG, raster)
     torch.testing.assert_close(own, bruteforce_reference_diagonals(model, cam).sum(1), rtol=1e-4,
                                atol=1e-6 * float(own.max()))
 
@@ -105,6 +110,9 @@ def test_recorded_train_views(tmp_path):
     assert recorded_train_views(tmp_path, 90, 9, "coverage") == [0, 5, 2, 7]
 
 
+# Slow (a training run, then render.py --uncertainty and metrics.py in subprocesses): the per-Gaussian variance
+# and the composited map are checked above, the CLIs' pipeline by tests/test_train_e2e.py.
+@pytest.mark.slow
 def test_render_uncertainty_then_metrics(tiny_scene, tmp_path):
     model = tmp_path / "m"
     r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(model), "--eval", "--iterations", "30",

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import logging
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,11 +19,10 @@ from utils.image import load_rgba
 from utils.losses import psnr, ssim
 from utils.lpips_loader import LPIPS_MIN_SIDE, lpips_distance
 from active.uncertainty import UNCERTAINTY_KINDS  # render.py --uncertainty_kind: one folder per kind
+from utils.model_dir import METHOD_PATTERN
 from utils.uncertainty_metrics import AUSE_VARIANTS, ause, spearman
 
 log = logging.getLogger(__name__)
-
-METHOD_PATTERN = re.compile(r"ours_(\d+)")
 
 REGIONS = ("image", "object")
 NO_ALPHA = "whole image (the scene has no alpha; object = image)"

@@ -1,11 +1,13 @@
 """Block log-det information: gains against dense torch.logdet, whitened == direct form, the ridge, robustness on
-nearly singular blocks, errors, oracle counting."""
+nearly singular blocks, errors, oracle counting; the sparse factor path (numba kernels and their torch twin) against
+the dense twin `DenseBlockInformation`."""
 import math
 
 import pytest
 import torch
 
-from active.logdet import BlockGainOracle, BlockInformation, logdet_identity_plus
+from active.logdet import (BlockGainOracle, BlockInformation, DenseBlockInformation, ViewFactors,
+                           logdet_identity_plus)
 from utils.errors import UserError
 
 
@@ -39,9 +41,13 @@ def clamped_gain_reference(a_blocks, h_blocks):
     return float(torch.log1p(torch.linalg.eigvalsh(w).clamp_min(0)).sum())
 
 
-def test_gains_equal_dense_logdet_through_commits():
+BACKENDS = ("compiled", "torch")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_gains_equal_dense_logdet_through_commits(backend):
     prior, *views = random_blocks(6, 4, 3, seed=1)
-    info = BlockInformation(prior, delta_rel=1e-3, delta_abs=1e-6)
+    info = BlockInformation(prior, delta_rel=1e-3, delta_abs=1e-6, backend=backend)
     a = dense(info.matrix)  # [12, 12]
     h0_logdet = float(torch.logdet(a))
     accepted = []
@@ -59,14 +65,15 @@ def test_gains_equal_dense_logdet_through_commits():
     assert math.isclose(info.rho(), sum(accepted), rel_tol=1e-10)
 
 
-def test_whitened_equals_direct_form_on_ill_conditioned_blocks():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_whitened_equals_direct_form_on_ill_conditioned_blocks(backend):
     # Prior eigenvalues spread over 1e-4..1e4 (ratio 1e8) per block, views of similar spread.
     g = torch.Generator().manual_seed(5)
     q, _ = torch.linalg.qr(torch.randn(8, 5, 5, generator=g, dtype=torch.float64))
     spread = torch.logspace(-4, 4, 5, dtype=torch.float64)
     prior = q @ torch.diag_embed(spread) @ q.transpose(-1, -2)
     view = random_blocks(1, 8, 5, seed=6)[0] * 1e2
-    info = BlockInformation(prior, delta_rel=0.0, delta_abs=1e-12)
+    info = BlockInformation(prior, delta_rel=0.0, delta_abs=1e-12, backend=backend)
     a = info.matrix
     direct = float((torch.logdet(a + view) - torch.logdet(a)).sum())
     # Direct form loses ~cond * eps = 1e8 * 1e-16 relative accuracy; 1e-7 leaves room for that.
@@ -98,7 +105,8 @@ def test_identity_plus_clamps_negative_eigenvalues():
     assert bool((terms >= 0).all()) and abs(float(terms[3])) < 1e-15
 
 
-def test_nearly_singular_blocks_give_finite_nonnegative_gains():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_nearly_singular_blocks_give_finite_nonnegative_gains(backend):
     # Rank-deficient float32-accumulated blocks (J^T J with J of rank 2 in float32), as the Fisher oracle makes:
     # exact null directions plus negative eigenvalues ~ eps32 * |H|.
     g = torch.Generator().manual_seed(2)
@@ -108,17 +116,19 @@ def test_nearly_singular_blocks_give_finite_nonnegative_gains():
     prior = blocks32[0]
     zero = torch.zeros_like(prior)
     for p in (prior, zero):
-        info = BlockInformation(p)
+        info = BlockInformation(p, backend=backend)
+        # Eigenvalues of W are known to ~eps64 * |W| absolutely (|W| ~ 1e14 over the zero prior): a log1p of the
+        # small ones moves by up to that much, over N * P = 60 of them. The sparse path takes the PSD part of H
+        # before whitening, the reference after: for noise eigenvalues the two differ by that much, no more.
+        noise = 60 * 2.2e-16 * float(torch.linalg.matrix_norm(DenseBlockInformation(p).whiten(blocks32[1]),
+                                                               ord=2).max())
         for view in (blocks32[1], -blocks32[2] * 1e-9, zero):  # a PSD-ish view, a tiny negative view, no view
             gain = info.gain(view)
             assert math.isfinite(gain) and gain >= 0
-            assert math.isclose(gain, clamped_gain_reference(info.matrix, view), rel_tol=1e-6, abs_tol=1e-9)
-            # ^ eigen-sqrt twin on matrices of condition up to 1/delta_rel = 1e6: ~1e-10 relative; abs for gain 0
+            assert math.isclose(gain, clamped_gain_reference(info.matrix, view), rel_tol=1e-6, abs_tol=noise)
+            # ^ eigen-sqrt twin on matrices of condition up to 1/delta_rel = 1e6: ~1e-10 relative
         assert info.gain(zero) == 0.0
         gain = info.gain(blocks32[1])
-        # Eigenvalues of W are known to ~eps64 * |W| absolutely (|W| ~ 1e14 over the zero prior): a log1p of the
-        # small ones moves by up to that much, over N * P = 60 of them.
-        noise = 60 * 2.2e-16 * float(torch.linalg.matrix_norm(info.whiten(blocks32[1]), ord=2).max())
         info.add(blocks32[1])  # committing a non-PSD view never fails, and adds exactly the measured gain
         assert abs(info.rho() - gain) <= 1e-9 * gain + noise
 

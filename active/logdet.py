@@ -273,11 +273,21 @@ class DenseBlockInformation:
 
     def gain(self, blocks: torch.Tensor) -> float:
         """rho(v | S) for the view's dense blocks [N, P, P]."""
-        return float(logdet_identity_plus(self.whiten(blocks)).sum())
+        return self.gain_and_whitened(blocks)[0]
+
+    def gain_and_whitened(self, blocks: torch.Tensor) -> tuple[float, torch.Tensor]:
+        """`gain` and the whitened blocks W [N, P, P] it came from (what `add_whitened` takes)."""
+        w = self.whiten(blocks)
+        return float(logdet_identity_plus(w).sum()), w
 
     def add(self, blocks: torch.Tensor) -> None:
-        """Commit: L <- L C with C C^T = I + max(W, 0), C = R^T from a QR of (V diag(1 + max(lambda, 0))^1/2)^T."""
-        evals, evecs = torch.linalg.eigh(self.whiten(blocks))  # [N, P], [N, P, P]
+        """Commit a view's dense blocks [N, P, P]."""
+        self.add_whitened(self.whiten(blocks))
+
+    def add_whitened(self, w: torch.Tensor) -> None:
+        """Commit W = L^-1 H_v L^-T [N, P, P]: L <- L C with C C^T = I + max(W, 0), C = R^T from a QR of
+        (V diag(1 + max(lambda, 0))^1/2)^T (backward stable at any condition number)."""
+        evals, evecs = torch.linalg.eigh(w)  # [N, P], [N, P, P]
         root = evecs * torch.sqrt(1.0 + evals.clamp_min(0.0))[:, None, :]  # M, M M^T = I + W+  [N, P, P]
         r = torch.linalg.qr(root.transpose(-1, -2), mode="r").R  # M^T = Q R  ->  M M^T = R^T R  [N, P, P]
         r = r * torch.sign(torch.diagonal(r, dim1=-2, dim2=-1))[..., None]  # positive diagonal (rows scaled +-1)

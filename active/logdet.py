@@ -198,22 +198,28 @@ class BlockInformation:
             backend: "auto" (numba kernels on CPU when numba imports, else torch), "compiled" or "torch".
         """
         self.delta_rel, self.delta_abs = float(delta_rel), float(delta_abs)
-        self.matrix, self.chol = ridged_prior(prior_blocks, self.delta_rel, self.delta_abs)  # A, L [N, P, P]
+        self.prior_matrix, self.chol = ridged_prior(prior_blocks, self.delta_rel, self.delta_abs)  # A_0, L [N, P, P]
         self.compiled = _compiled(backend, self.chol)
+        self.committed = False
         self.prior_logdet = self.logdet()
 
     @property
     def num_gaussians(self) -> int:
-        return self.matrix.shape[0]
+        return self.chol.shape[0]
+
+    @property
+    def matrix(self) -> torch.Tensor:
+        """A [N, P, P]: the ridged prior until a view is committed, then L L^T (formed on request only)."""
+        return self.chol @ self.chol.transpose(-1, -2) if self.committed else self.prior_matrix
 
     def view(self, blocks: ViewInput) -> ViewFactors:
         """A view as factors over the Gaussians it sees (dense blocks converted), shape-checked."""
         if not isinstance(blocks, ViewFactors):
-            assert blocks.shape == self.matrix.shape, \
-                f"view blocks must be {tuple(self.matrix.shape)}, got {tuple(blocks.shape)}"
+            assert blocks.shape == self.chol.shape, \
+                f"view blocks must be {tuple(self.chol.shape)}, got {tuple(blocks.shape)}"
             return ViewFactors.from_blocks(blocks)
-        assert blocks.num_gaussians == self.num_gaussians and blocks.num_params == self.matrix.shape[-1], \
-            f"view factors must cover {self.num_gaussians} Gaussians x {self.matrix.shape[-1]} parameters, got " \
+        assert blocks.num_gaussians == self.num_gaussians and blocks.num_params == self.chol.shape[-1], \
+            f"view factors must cover {self.num_gaussians} Gaussians x {self.chol.shape[-1]} parameters, got " \
             f"{blocks.num_gaussians} x {blocks.num_params}"
         return blocks
 
@@ -230,19 +236,19 @@ class BlockInformation:
         """rho(v | S) = logdet(A + H_v) - logdet(A) for the view's blocks [N, P, P] or factors (not counted)."""
         return float(self.gain_terms(self.view(blocks)).sum())
 
-    def add(self, blocks: ViewInput) -> None:
+    def add(self, blocks: ViewInput) -> float:
         """Commit a view: A <- A + H_v+ on the Gaussians it sees, with H_v+ the PSD part of H_v its factor holds, so
-        logdet(A) grows by `gain(blocks)`."""
+        logdet(A) grows by `gain(blocks)`. Returns that growth (the sum of the committed per-block terms)."""
         view = self.view(blocks)
         if view.indices.shape[0] == 0:
-            return
+            return 0.0
         if self.compiled:
             from active import logdet_kernels
             terms = torch.from_numpy(logdet_kernels.commit(*_kernel_args(self.chol, view)))
         else:
             terms = factor_commit_torch(self.chol, view)
-        changed = view.indices[terms > 0]
-        self.matrix[changed] = self.chol[changed] @ self.chol[changed].transpose(-1, -2)
+        self.committed = True
+        return float(terms.sum())
 
     def logdet(self) -> float:
         """logdet(A) = sum of the per-Gaussian log-dets."""

@@ -217,8 +217,10 @@ def test_compiled_kernels_equal_torch_twin_per_block():
     for stored in (view, view.stored_as(torch.float32)):
         torch.testing.assert_close(compiled.gain_terms(stored), twin.gain_terms(stored), rtol=1e-10, atol=0)
         # ^ the same float64 arithmetic in another order; 14 x 14 priors of condition up to ~1e5: ~1e-12 seen
-    compiled.add(view)
-    twin.add(view)
+    added = compiled.add(view), twin.add(view)
+    for info, growth in zip((compiled, twin), added):  # a commit's terms are the log-det growth, == the gain
+        assert math.isclose(growth, info.rho(), rel_tol=1e-10)
+    assert math.isclose(added[0], float(BlockInformation(prior).gain(view)), rel_tol=1e-10)
     torch.testing.assert_close(compiled.chol, twin.chol, rtol=1e-12, atol=1e-12)
     torch.testing.assert_close(compiled.matrix, twin.matrix, rtol=1e-12, atol=1e-10)
 

@@ -15,8 +15,8 @@ options it declares (default eps = 0.1 0.3 0.6); ratios are taken to the row wit
 same K (exhaustive greedy when it runs). Peak resident memory of the process is printed at the end.
 Each selector gets the oracle its `oracle_kind` declares (log-det: sparse view factors, `active.logdet`; diagonal:
 the blocks' diagonals). `--compare_dense` also runs every log-det selector on the dense twin (`DenseBlockInformation`
-over [N, P, P] blocks: the implementation before the sparse factors) and prints both times and whether the picks
-agree. `benchmarks/selection_cost.py` times old vs new per candidate (Fisher pass, gain, commit, end to end).
+over [N, P, P] blocks: the implementation before the sparse factors; its blocks are the same float32 factors
+scattered to dense on every call, a few % of a dense gain) and prints both times and whether the picks agree. `benchmarks/selection_cost.py` times old vs new per candidate (Fisher pass, gain, commit, end to end).
 `--memory_table` runs the first of --methods (first K of --ks) in both modes, each in its own process, for a growing number of candidates (--pool_sizes, the last = all) and prints
 the peak resident memory of each: cached grows with M, streaming stays flat.
 """
@@ -160,7 +160,6 @@ def main() -> None:
         return
 
     cache, t_cache, cache_mb = {}, 0.0, 0.0
-    dense_cache, dense_mb = {}, 0.0
     diag_cache = {}
     kinds = {build_selector(m).oracle_kind for m in args.methods}
     if args.mode == "cached":
@@ -174,9 +173,6 @@ def main() -> None:
         print(f"cache: {len(candidates)} views, {cache_mb:.0f} MB of float32 visible factors "
               f"(dense float64 blocks would be {len(candidates) * prior.numel() * 8 / 2**20:.0f} MB), "
               f"built in {t_cache:.1f} s")
-        if args.compare_dense and "logdet" in kinds:
-            dense_cache = {v: f.dense() for v, f in cache.items()}
-            dense_mb = sum(b.numel() * b.element_size() for b in dense_cache.values()) / 2**20
     prior_diag = sum(diagonals(v) for v in seeds) if "diagonal" in kinds else None
     columns = parameter_columns(gaussians, RAW_PARAMETER_GROUPS)
 
@@ -194,7 +190,7 @@ def main() -> None:
                     if kind == "diagonal":
                         return diag_cache[v] if diag_cache else diagonals(v)
                     if variant == "dense":
-                        return dense_cache[v] if dense_cache else factors(v).dense()
+                        return cache[v].dense() if cache else factors(v).dense()  # scattered per call
                     return cache[v] if cache else factors(v)
 
                 if kind == "diagonal":
@@ -222,7 +218,7 @@ def main() -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"machine": platform.platform(), "torch": torch.__version__, "mode": args.mode,
                                "gaussians": gaussians.num_gaussians, "candidates": len(candidates),
-                               "cache_mb": cache_mb, "dense_cache_mb": dense_mb, "train_step_s": t_step,
+                               "cache_mb": cache_mb, "train_step_s": t_step,
                                "fisher_view_s": t_fisher, "fisher_factors_s": t_factors, "gain_s": t_gain,
                                "dense_gain_s": t_dense_gain, "cache_build_s": t_cache,
                                "peak_rss_mb": peak_mb, "rows": rows}, indent=2))

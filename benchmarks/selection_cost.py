@@ -111,18 +111,22 @@ def garden(size: str, sh_degree: int = 3) -> tuple[GaussianModel, list[Camera], 
 
 def per_candidate(name: str, gaussians: GaussianModel, cams: list[Camera], bg: torch.Tensor,
                   settings: RasterSettings, train: list[int], candidates: list[int], num_candidates: int,
-                  peak: float, dense_limit: float, repeats: int) -> list[dict]:
+                  peak: float, dense_limit: float, repeats: int,
+                  param_groups: tuple[str, ...] = ("default", "full_sh")) -> list[dict]:
     """Old vs new per-candidate cost on one scene, for 14-parameter and full-SH blocks."""
     rows = []
     n = gaussians.num_gaussians
     with torch.no_grad():  # the render + attribute Gram part of a Fisher pass (the rest: Jacobian, factor)
         t_gram = timed(lambda: fisher._attribute_gram(gaussians, cams[candidates[0]], bg, settings), 1)[0]
     print(f"{name}: render + attribute Gram of one view {t_gram:.2f} s", flush=True)
-    for groups in ("default", "full_sh"):
+    for groups in param_groups:
         params = FISHER_PARAM_GROUPS[groups]
         p = sum(gaussians.params[g].shape[1:].numel() for g in params)
         dense_gb = n * p * p * 8 * 4 / 2**30  # blocks, whitened copy, eigenvectors, QR: ~4 dense copies
         do_old = dense_gb <= dense_limit
+        if n * p * p * 8 * 3 / 2**30 > 2 * dense_limit:  # the new path's dense state: prior, A, L
+            print(f"{name} {groups}: skipped (the dense prior, A and L need {n * p * p * 24 / 2**30:.1f} GB)")
+            continue
 
         def factors(v):
             return FisherViewBlocks.stored(fisher_view_factors(gaussians, cams[v], bg, settings, 1.0, params))
@@ -184,7 +188,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--peak_gflops", type=float, default=96.0,
                         help="f64 peak of all threads (default: 2 cores x 48, AVX2 FMA at ~3 GHz)")
-    parser.add_argument("--dense_limit_gb", type=float, default=4.0)
+    parser.add_argument("--dense_limit_gb", type=float, default=4.0,
+                        help="skip the old path above this (the new path above twice this)")
+    parser.add_argument("--params", nargs="+", choices=tuple(FISHER_PARAM_GROUPS), default=list(FISHER_PARAM_GROUPS))
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
@@ -203,11 +209,11 @@ def main() -> None:
         candidates = [v for v in range(len(cams)) if v not in seeds]
         name = f"{args.model} {cams[0].width}x{cams[0].height}"
         out["scenes"] += per_candidate(name, trained.gaussians, cams, trained.background, trained.settings, seeds,
-                                       candidates, len(candidates), peak, args.dense_limit_gb, args.repeats)
+                                       candidates, len(candidates), peak, args.dense_limit_gb, args.repeats, args.params)
     for size in args.garden or []:
         gaussians, cams, bg, settings = garden(size)
         out["scenes"] += per_candidate(f"garden {size}", gaussians, cams, bg, settings, [0], [1, 2, 1], 78, peak,
-                                       args.dense_limit_gb, args.repeats)
+                                       args.dense_limit_gb, args.repeats, args.params)
     out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"peak resident memory of this process: {out['peak_rss_mb']:.0f} MB")
     path = args.json or RESULTS_DIR / f"selection_cost_{time.strftime('%Y%m%d_%H%M%S')}.json"

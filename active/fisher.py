@@ -91,11 +91,13 @@ def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: to
         indices [n] of the Gaussians with a non-zero Gram, factors [n, P, A] float64.
     """
     with torch.no_grad():
+        for group in param_groups:  # the dense blocks of every Gaussian would carry a NaN parameter: refuse it too
+            check_finite(gaussians.params[group], "view", gaussians.num_gaussians)
         gram = _attribute_gram(gaussians, camera, background, settings)  # [N, A, A] float64
+        check_finite(gram, "view", gaussians.num_gaussians)
         indices = torch.nonzero(gram.flatten(1).abs().amax(dim=1) > 0).flatten() if gram.shape[0] else \
             torch.zeros(0, dtype=torch.long, device=gram.device)  # [n]
         gram = gram[indices]  # [n, A, A]
-        check_finite(gram, "view", gaussians.num_gaussians)
         jac = _projection_jacobian(gaussians, camera, param_groups, indices)  # [n, A, P]
         check_finite(jac, "view", gaussians.num_gaussians)
         evals, evecs = torch.linalg.eigh(gram)  # [n, A], [n, A, A]

@@ -138,3 +138,12 @@ def test_cached_factors_are_bounded_by_the_budget_in_bytes():
     oracle.blocks.cache_bytes = sizes[3] + size5  # room for the two most recent views only
     oracle.blocks(5)
     assert list(oracle.blocks._cache) == [3, 5] and oracle.blocks._cached_bytes == sizes[3] + size5
+
+
+def test_non_finite_model_is_one_line_error():
+    from utils.errors import UserError
+    gaussians, cams = model(), cameras()
+    with torch.no_grad():
+        gaussians.params["sh_dc"][7, 0, 1] = float("nan")
+    with pytest.raises(UserError, match="view Fisher blocks of 80 Gaussians contain NaN or inf"):
+        fisher_view_factors(gaussians, cams[0], BG, SETTINGS)

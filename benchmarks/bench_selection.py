@@ -275,7 +275,8 @@ def print_rows(rows: list[dict]) -> None:
     (exhaustive greedy when it ran) and the time per evaluated oracle; then the time per evaluated oracle summed
     over all rows of each method (per-view Fisher cost varies, so single cells scatter around the oracle ratio;
     the totals show whether overhead eats the savings)."""
-    print(f"{'K':>2} {'method':8} {'oracle':6} {'options':>9} {'conserv.':>8} {'evaluated':>9} {'views':>5} {'select s':>9} "
+    print(f"{'K':>2} {'method':8} {'oracle':6} {'options':>9} {'conserv.':>8} {'evaluated':>9} {'views':>5} "
+          f"{'select s':>9} "
           f"{'time/max':>8} {'evals/max':>9} {'s/eval':>7}")
     for r in rows:
         ref = max((p for p in rows if p["K"] == r["K"] and p.get("oracle") == r.get("oracle")),

@@ -146,7 +146,8 @@ def per_candidate(name: str, gaussians: GaussianModel, cams: list[Camera], bg: t
         t_gain = statistics.median(timed(lambda v=v: new.gain(v), 3)[0] for v in views)
         mean_bytes = sum(v.nbytes for v in views) / len(views)
         seen = sum(v.indices.numel() for v in views) / len(views)
-        row = {"scene": name, "params": groups, "P": p, "N": n, "seen": seen, "fisher_new_s": t_fisher, "gram_s": t_gram,
+        row = {"scene": name, "params": groups, "P": p, "N": n, "seen": seen, "fisher_new_s": t_fisher,
+               "gram_s": t_gram,
                "gain_new_ms": 1e3 * t_gain, "rate_new_hz": 1.0 / (t_fisher + t_gain),
                "stage_cache_new_mb": num_candidates * mean_bytes / 2**20,
                "stage_cache_old_mb": num_candidates * n * p * p * 8 / 2**20,
@@ -209,7 +210,8 @@ def main() -> None:
         candidates = [v for v in range(len(cams)) if v not in seeds]
         name = f"{args.model} {cams[0].width}x{cams[0].height}"
         out["scenes"] += per_candidate(name, trained.gaussians, cams, trained.background, trained.settings, seeds,
-                                       candidates, len(candidates), peak, args.dense_limit_gb, args.repeats, args.params)
+                                       candidates, len(candidates), peak, args.dense_limit_gb, args.repeats,
+                                       args.params)
     for size in args.garden or []:
         gaussians, cams, bg, settings = garden(size)
         out["scenes"] += per_candidate(f"garden {size}", gaussians, cams, bg, settings, [0], [1, 2, 1], 78, peak,

@@ -20,3 +20,12 @@ def test_default_arguments_complete_on_a_tiny_model(tiny_scene, tmp_path):
         sparse = next(s for s in rows if s["oracle"] == "sparse" and (s["K"], s["method"], s["options"]) ==
                       (dense["K"], dense["method"], dense["options"]))
         assert sparse["ids"] == dense["ids"] and sparse["evaluated"] == dense["evaluated"]
+
+
+def test_selection_cost_synthetic_old_and_new_agree(tmp_path):
+    out = tmp_path / "cost.json"
+    r = run_cli("benchmarks/selection_cost.py", "--synthetic", "300", "--visible", "0.3", "--threads", "1",
+                "--repeats", "1", "--json", str(out))
+    assert r.returncode == 0, r.stderr[-2000:]
+    row = json.loads(out.read_text())["synthetic"][0]
+    assert row["visible"] == 90 and row["gain_rel_diff"] < 1e-10 and row["f32_rel_diff"] < 1e-6

@@ -35,17 +35,15 @@ from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from active import SelectionContext, build_selector, list_selectors, selector_options  # noqa: E402
-from active.fisher import (FisherViewBlocks, DiagonalGainOracle, fisher_view_blocks,  # noqa: E402
-                           fisher_view_diagonals, fisher_view_factors, parameter_columns)
-from active.logdet import BlockGainOracle, BlockInformation, DenseBlockInformation  # noqa: E402
-from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS  # noqa: E402
-from active.schedule import farthest_point_views  # noqa: E402
-from gaussian_renderer import render  # noqa: E402
-from scene.trained import load_trained  # noqa: E402
-from utils.losses import l1_loss, ssim  # noqa: E402
+from active import SelectionContext, build_selector, list_selectors, selector_options
+from active.fisher import (DiagonalGainOracle, FisherViewBlocks, fisher_view_blocks, fisher_view_diagonals,
+                           fisher_view_factors, parameter_columns)
+from active.logdet import BlockGainOracle, BlockInformation, DenseBlockInformation
+from active.schedule import farthest_point_views
+from gaussian_renderer import render
+from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
+from scene.trained import load_trained
+from utils.losses import photometric_loss
 
 
 RESULTS_DIR = Path(__file__).parent / "results"
@@ -126,7 +124,7 @@ def main() -> None:
 
     def train_step(v):
         out = render(cams[v], gaussians, bg, settings)
-        loss = 0.8 * l1_loss(out.image, cams[v].image) + 0.2 * (1 - ssim(out.image, cams[v].image))
+        loss = photometric_loss(out.image, cams[v].image)
         loss.backward()
 
     def blocks(v):

@@ -19,23 +19,20 @@ import json
 import platform
 import resource
 import statistics
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from active import fisher  # noqa: E402
-from active.fisher import (FISHER_PARAM_GROUPS, FisherViewBlocks, fisher_view_blocks,  # noqa: E402
+from active import fisher
+from active.fisher import (FISHER_PARAM_GROUPS, FisherViewBlocks, fisher_view_blocks,
                            fisher_view_factors)
-from active.logdet import BlockInformation, DenseBlockInformation, ViewFactors  # noqa: E402
-from active.schedule import farthest_point_views  # noqa: E402
-from gaussian_renderer import RasterSettings  # noqa: E402
-from scene.cameras import Camera  # noqa: E402
-from scene.gaussian_model import GaussianModel  # noqa: E402
+from active.logdet import BlockInformation, DenseBlockInformation, ViewFactors
+from active.schedule import farthest_point_views
+from gaussian_renderer import RasterSettings
+from scene.cameras import Camera
+from scene.gaussian_model import GaussianModel
 
 RESULTS_DIR = Path(__file__).parent / "results"
 GARDEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "gsplat_garden" / "test_garden.npz"

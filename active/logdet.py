@@ -147,11 +147,17 @@ def factor_commit_torch(chol: torch.Tensor, view: ViewFactors) -> torch.Tensor:
 
 
 def _compiled(backend: str, tensor: torch.Tensor) -> bool:
-    """Whether the numba kernels run (CPU tensors and numba importable; "compiled" without numba is an error)."""
+    """Whether the numba kernels run: CPU tensors and numba importable ("compiled" without numba is an error, "auto"
+    then takes the torch twin)."""
     if backend not in LOGDET_BACKENDS:
         raise ValueError(f"unknown log-det backend {backend!r}, expected one of {LOGDET_BACKENDS}")
-    from gaussian_renderer.compiled import use_compiled
-    return use_compiled(backend, tensor)
+    if backend == "torch" or tensor.device.type != "cpu":
+        return False
+    from gaussian_renderer.compiled import numba_import_error
+    error = numba_import_error()
+    if error is not None and backend == "compiled":
+        raise UserError(f"the compiled log-det kernels need numba ({error}); pip install numba (requirements.txt)")
+    return error is None
 
 
 def _kernel_args(chol: torch.Tensor, view: ViewFactors) -> tuple:

@@ -40,7 +40,7 @@ POP_GS_HZ = {"block w/o SH": 1.71, "full block": 0.15, "diagonal": 12.16}  # per
 
 
 def timed(fn, repeats: int) -> tuple[float, object]:
-    """Median seconds of `repeats` calls (after none: the first call is timed too) and the last result."""
+    """Median seconds of `repeats` calls (no warm-up: the first call is timed too) and the last result."""
     times, out = [], None
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -114,7 +114,11 @@ def per_candidate(name: str, gaussians: GaussianModel, cams: list[Camera], bg: t
     rows = []
     n = gaussians.num_gaussians
     with torch.no_grad():  # the render + attribute Gram part of a Fisher pass (the rest: Jacobian, factor)
-        t_gram = timed(lambda: fisher._attribute_gram(gaussians, cams[candidates[0]], bg, settings), 1)[0]
+        def gram():
+            return fisher._attribute_gram(gaussians, cams[candidates[0]], bg, settings)
+
+        gram()  # compile (numba caches on disk)
+        t_gram = timed(gram, 1)[0]
     print(f"{name}: render + attribute Gram of one view {t_gram:.2f} s", flush=True)
     for groups in param_groups:
         params = FISHER_PARAM_GROUPS[groups]

@@ -87,8 +87,15 @@ def main(argv: list[str] | None = None) -> None:
                         help="LPIPS variant; must match the weights (default: the variant the weights hold)")
     parser.add_argument("--device", default="cpu", help="torch device for the metrics (default: cpu)")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--report", action="store_true",
+                        help="also write each model directory's report.html (report.py; a few seconds each)")
     args = parser.parse_args(argv)
-    print(format_table(evaluate(args.model_paths, args.lpips_weights, args.lpips_net, args.device, args.quiet)))
+    summary = evaluate(args.model_paths, args.lpips_weights, args.lpips_net, args.device, args.quiet)
+    print(format_table(summary))
+    if args.report:
+        from reports import write_run_report
+        for model_dir in summary:
+            print(f"report: {write_run_report(model_dir)}")
 
 
 if __name__ == "__main__":

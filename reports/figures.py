@@ -62,7 +62,7 @@ def scene_figure(points: np.ndarray, point_colors: np.ndarray, cams: list[Camera
             name=f"{group} ({len(members)})", legendgroup=group, meta=CAMERA_META, marker=marker,
             hovertext=[_hover(c) for c in members], hoverinfo="text"))
     fig.update_layout(title=title or None, height=height, margin={"l": 0, "r": 0, "t": 30 if title else 0, "b": 0},
-                      legend={"itemsizing": "constant"},
+                      legend={"itemsizing": "constant", "x": 0.0, "y": 1.0, "bgcolor": "rgba(255,255,255,0.6)"},
                       scene={"aspectmode": "data", "xaxis": {"visible": False}, "yaxis": {"visible": False},
                              "zaxis": {"visible": False}})
     return fig

@@ -69,6 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "then carry Spearman and AUSE (a rerun with it adds them to finished runs)")
     p.add_argument("--progress_every", default="300",
                    help="seconds between the progress lines of running jobs (iteration, Gaussians; default 300)")
+    p.add_argument("--report", action="store_true", help="after the runs, write OUT/<setup>/report.html (methods "
+                   "side by side) and every run's report.html (also: python report.py --grid OUT/<setup>)")
     p.add_argument("--dry_run", action="store_true", help="print the jobs (slurm: also write the sbatch file) "
                    "without running anything")
     return p
@@ -176,7 +178,12 @@ def parse(argv: list[str]) -> GridConfig:
 
 def main() -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout)
-    return min(run_grid(parse(sys.argv[1:])), 100)
+    cfg = parse(sys.argv[1:])
+    failed = run_grid(cfg)
+    if not cfg.dry_run and build_parser().parse_known_args(sys.argv[1:])[0].report:
+        from reports import write_grid_report
+        print(f"report: {write_grid_report(cfg.setup_dir)}")
+    return min(failed, 100)
 
 
 if __name__ == "__main__":

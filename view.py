@@ -15,7 +15,7 @@ from utils.errors import UserError, run_cli
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Load the model, serve it until Ctrl-C (or SIGTERM), stop cleanly."""
+    """Load the model, serve it until Ctrl-C (SIGINT) or SIGTERM, stop cleanly."""
     import signal
 
     logging.basicConfig(level=logging.WARNING, format="%(message)s")
@@ -42,11 +42,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"client {client.client_id} connected", flush=True)
 
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    try:
-        while not stop.wait(0.5):
-            pass
-    except KeyboardInterrupt:
+    for sig in (signal.SIGINT, signal.SIGTERM):  # also when started with SIGINT ignored (a background job)
+        signal.signal(sig, lambda *_: stop.set())
+    while not stop.wait(0.5):
         pass
     viewer.stop()
     print("viewer stopped", flush=True)

@@ -40,6 +40,11 @@ def rotmat_to_wxyz(rot: np.ndarray) -> np.ndarray:
     return q * (1 if q[0] >= 0 else -1) / np.linalg.norm(q)
 
 
+def to_uint8(image: torch.Tensor) -> np.ndarray:
+    """[3, H, W] float in [0, 1] -> [H, W, 3] uint8, clamped and rounded as utils.image.save_image does."""
+    return (image.detach().float().clamp(0, 1).permute(1, 2, 0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+
+
 def splat_arrays(trained: TrainedModel) -> dict[str, np.ndarray]:
     """Centres [N,3], covariances [N,3,3], degree-0 colours [N,3] in [0,1] and opacities [N,1] (float32)."""
     g = trained.gaussians
@@ -79,7 +84,9 @@ class Viewer:
         self.scene_cameras = trained.scene.test_cameras + trained.scene.train_cameras  # cameras.json order
         splats = splat_arrays(trained)
         self.server.scene.add_gaussian_splats("/gaussians", **splats)
-        depth = frustum_depth(self.cameras, np.median(splats["centers"], axis=0))
+        center = np.median(splats["centers"], axis=0)  # [3]
+        depth = 0.5 * frustum_depth(self.cameras, center)
+        self.frame_view(center)
         self.title = self.server.gui.add_markdown("Click a camera to see its image, a render and its uncertainty.")
         blank = np.full((8, 8, 3), 255, np.uint8)
         self.images = {k: self.server.gui.add_image(blank, label=k) for k in ("image", "render", "uncertainty")}
@@ -92,16 +99,30 @@ class Viewer:
                 self.server.scene.add_label(f"/cameras/{i:04d}/pick", cam.label)
             frustum.on_click(lambda event, i=i: self.show(i))
 
+    def frame_view(self, center: np.ndarray) -> None:
+        """Start the browser's camera outside all cameras, looking at `center` [3], up = the cameras' mean up."""
+        if not self.cameras:
+            return
+        pos = np.stack([c.position for c in self.cameras])  # [C, 3]
+        up = -np.mean([c.rotation[:, 1] for c in self.cameras if c.rotation is not None], axis=0)  # OpenCV y is down
+        up = up / max(np.linalg.norm(up), 1e-9)
+        reach = np.linalg.norm(pos - center, axis=1).max()
+        away = pos[0] - center
+        away = away / max(np.linalg.norm(away), 1e-9)
+        self.server.initial_camera.position = center + 1.6 * reach * away + 0.4 * reach * up
+        self.server.initial_camera.look_at = center
+        self.server.initial_camera.up = up
+
     def show(self, index: int) -> None:
         """Fill the GUI panel with camera `index` (cameras.json order): its image, a render, its uncertainty."""
         cam, view = self.cameras[index], self.scene_cameras[index]
         gain = f", gain {cam.gain:.4g}" if cam.gain is not None else ""
         self.title.content = f"**{cam.name}** ({cam.group}{gain})"
         if view.image is not None:
-            self.images["image"].image = (view.image.clamp(0, 1).permute(1, 2, 0).cpu().numpy() * 255).astype(np.uint8)
+            self.images["image"].image = to_uint8(view.image)
         with torch.no_grad():
             out = render(view, self.trained.gaussians, self.trained.background, self.trained.settings)
-        self.images["render"].image = (out.image.clamp(0, 1).permute(1, 2, 0).cpu().numpy() * 255).astype(np.uint8)
+        self.images["render"].image = to_uint8(out.image)
         unc = uncertainty_png(self.trained.path, index, len(self.trained.scene.test_cameras))
         self.images["uncertainty"].image = open_rgb(unc) if unc else np.full((8, 8, 3), 200, np.uint8)
         self.images["uncertainty"].label = "uncertainty" if unc else "uncertainty (render.py --uncertainty)"

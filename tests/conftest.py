@@ -47,13 +47,14 @@ def run_cli(*args: str, cwd: Path = ROOT, timeout: int = 240) -> subprocess.Comp
 @pytest.fixture(scope="session")
 def active_model(tiny_scene, tmp_path_factory) -> Path:
     """A finished pop_gs run on the tiny scene (2 seed views, 2 stages, 8 views), rendered with uncertainty maps
-    and evaluated: a model directory with everything a run report reads (made once per session)."""
+    and evaluated (metrics.py --report also writes its report.html): a model directory with everything a run report
+    reads (made once per session)."""
     model = tmp_path_factory.mktemp("active") / "model"
     for args in (("train.py", "-s", str(tiny_scene), "-m", str(model), "--method", "pop_gs", "--eval",
                   "--num_init_views", "2", "--views_per_step", "3", "--max_views", "8", "--iters_per_view", "4",
                   "--iterations", "70", "--num_random_points", "600", "--quiet", "--sh_degree", "1"),
                  ("render.py", "-m", str(model), "--quiet", "--uncertainty"),
-                 ("metrics.py", "-m", str(model), "--quiet")):
+                 ("metrics.py", "-m", str(model), "--quiet", "--report")):
         r = run_cli(*args)
         assert r.returncode == 0, r.stderr
     return model

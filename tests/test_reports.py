@@ -70,8 +70,10 @@ def test_run_report_shows_every_camera_stage_metric_and_view(active_model, tmp_p
 
 
 def test_run_report_cli_defaults_to_the_model_dir(active_model, tmp_path):
+    assert "Run report" in (active_model / "report.html").read_text()  # metrics.py --report wrote it
     model = tmp_path / "m"
     shutil.copytree(active_model, model)
+    (model / "report.html").unlink()
     r = run_cli("report.py", "-m", str(model))
     assert r.returncode == 0, r.stderr
     assert (model / "report.html").is_file() and "wrote" in r.stdout

@@ -64,8 +64,20 @@ def scene_figure(points: np.ndarray, point_colors: np.ndarray, cams: list[Camera
     fig.update_layout(title=title or None, height=height, margin={"l": 0, "r": 0, "t": 30 if title else 0, "b": 0},
                       legend={"itemsizing": "constant", "x": 0.0, "y": 1.0, "bgcolor": "rgba(255,255,255,0.6)"},
                       scene={"aspectmode": "data", "xaxis": {"visible": False}, "yaxis": {"visible": False},
-                             "zaxis": {"visible": False}})
+                             "zaxis": {"visible": False}, "camera": view_from(cams)})
     return fig
+
+
+def view_from(cams: list[CameraView]) -> dict:
+    """A plotly scene camera with the cameras' mean up direction (OpenCV y is down) as up, seen from the side
+    and 35 degrees above."""
+    ups = [-c.rotation[:, 1] for c in cams if c.rotation is not None]
+    up = np.mean(ups, axis=0) if ups else np.array([0.0, 0.0, 1.0])
+    up = up / np.linalg.norm(up) if np.linalg.norm(up) > 1e-9 else np.array([0.0, 0.0, 1.0])
+    side = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
+    side = side / np.linalg.norm(side)
+    eye = 1.5 * (np.cos(np.radians(35)) * side + np.sin(np.radians(35)) * up)
+    return {"up": dict(zip("xyz", up.tolist())), "eye": dict(zip("xyz", eye.tolist()))}
 
 
 def psnr_views_figure(curve: list[tuple[int, float, str]], height: int = 340) -> go.Figure:

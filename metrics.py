@@ -115,10 +115,16 @@ def main(argv: list[str] | None = None) -> None:
                         help=f"comma-separated AUSE variants for uncertainty maps: {', '.join(AUSE_VARIANTS)} "
                              "(default: all)")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--report", action="store_true",
+                        help="also write each model directory's report.html (report.py; a few seconds each)")
     args = parser.parse_args(argv)
     variants = parse_ause_variants(args.ause)
     summary = evaluate(args.model_paths, args.lpips_weights, args.lpips_net, args.device, args.quiet, variants)
     print(format_table(summary, variants))
+    if args.report:
+        from reports import write_run_report
+        for model_dir in summary:
+            print(f"report: {write_run_report(model_dir)}")
 
 
 if __name__ == "__main__":

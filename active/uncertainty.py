@@ -36,7 +36,7 @@ from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 from utils.errors import UserError
-from utils.model_dir import SELECTION
+from utils.model_dir import SELECTION, UNCERTAINTY_KINDS
 
 
 def gaussian_uncertainty(gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
@@ -62,11 +62,6 @@ def uncertainty_map(camera: Camera, gaussians: GaussianModel, uncertainty: torch
     return render(camera, gaussians, background, settings, override_color=colors).image[0].float()
 
 
-UNCERTAINTY_KINDS = {  # --uncertainty_kind -> what the map shows (the colour bar's label)
-    "position_variance": "positional variance",
-    "fisherrf": "FisherRF colour information x depth (training views)",
-    "fisherrf_view": "FisherRF information x depth (the view itself)",
-}
 COLOUR_GROUPS = ("sh_dc", "sh_rest")
 
 

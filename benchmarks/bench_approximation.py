@@ -24,51 +24,25 @@ import itertools
 import json
 import math
 import statistics
-import sys
 import time
 from pathlib import Path
 
 import torch
 from tqdm import tqdm
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from active import SelectionContext, build_selector  # noqa: E402
+from active import SelectionContext, build_selector
 from active.fisher import FISHER_PARAM_GROUPS, DiagonalGainOracle, fisher_view_blocks, fisher_view_diagonals, \
-    parameter_columns  # noqa: E402
-from active.logdet import BlockGainOracle, BlockInformation  # noqa: E402
-from active.uncertainty import recorded_train_views  # noqa: E402
-from arguments import ActiveConfig, config_from_dict  # noqa: E402
-from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS  # noqa: E402
-from gaussian_renderer.projection import camera_centers, look_at_point  # noqa: E402
-from scene.trained import load_trained  # noqa: E402
-from utils.errors import UserError, run_cli  # noqa: E402
+    parameter_columns
+from active.brute_force import check_inputs, subset_rhos
+from active.logdet import BlockGainOracle, BlockInformation
+from active.uncertainty import recorded_train_views
+from arguments import ActiveConfig, config_from_dict
+from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
+from gaussian_renderer.projection import camera_centers, look_at_point
+from scene.trained import load_trained
+from utils.errors import UserError, run_cli
 
 STOCHASTIC = ("lite_gs", "ssg", "random")
-
-
-def check_inputs(m: int, ks: list[int], deltas: list[float], max_subsets: int) -> None:
-    """One-line UserErrors: delta_rel <= 0, K outside 1..M, or C(M, K) over the cap (the count and the cap named)."""
-    bad = [d for d in deltas if not d > 0]
-    if bad:
-        raise UserError(f"--delta_rel must be positive, got {', '.join(f'{d:g}' for d in bad)}")
-    for k in ks:
-        if not 1 <= k <= m:
-            raise UserError(f"--ks: K = {k} must lie in 1..M = {m}")
-        if math.comb(m, k) > max_subsets:
-            raise UserError(f"brute force over C({m}, {k}) = {math.comb(m, k)} subsets exceeds the cap of "
-                            f"{max_subsets} (--max_subsets); lower --candidates or K")
-
-
-def subset_rhos(information: BlockInformation, blocks: dict[int, torch.Tensor], candidates: list[int],
-                k: int) -> dict[tuple[int, ...], float]:
-    """rho(S) = logdet(A_0 + sum_S H_v) - logdet(A_0) for every K-subset S of `candidates`, by one Cholesky each."""
-    out = {}
-    for subset in itertools.combinations(candidates, k):
-        total = information.matrix + sum(blocks[v] for v in subset)  # [N, P, P]
-        chol = torch.linalg.cholesky(0.5 * (total + total.transpose(-1, -2)))
-        out[subset] = float(2.0 * torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum()) - information.prior_logdet
-    return out
 
 
 def selector_runs(eps: list[float]) -> list[tuple[str, str, dict]]:

@@ -9,14 +9,11 @@ from __future__ import annotations
 
 import argparse
 import io
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from reports.headless import quit_chromium, start_chromium  # noqa: E402
-from utils.errors import UserError, run_cli  # noqa: E402
+from reports.headless import quit_chromium, start_chromium
+from utils.errors import UserError, run_cli
 
 
 def small_jpeg(png: bytes, max_kb: int) -> bytes:

@@ -1,19 +1,15 @@
 """benchmarks/bench_approximation.py: the brute-force rho(S) equals committing the views one by one, OPT is the
 maximum, and bad inputs (delta <= 0, K out of range, too many subsets) are one-line errors naming the numbers."""
 import math
-import sys
-from pathlib import Path
 
 import pytest
 import torch
 
+from active.brute_force import check_inputs, subset_rhos
 from active.fisher import fisher_view_blocks
 from active.logdet import BlockInformation
 from tests.test_fisher_oracle import BG, cameras, settings, tiny_model
 from utils.errors import UserError
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from bench_approximation import check_inputs, subset_rhos  # noqa: E402
 
 
 def test_subset_rhos_equal_sequential_commits():

@@ -18,8 +18,7 @@ from utils.errors import UserError
 from utils.image import load_rgba
 from utils.losses import psnr, ssim
 from utils.lpips_loader import LPIPS_MIN_SIDE, lpips_distance
-from active.uncertainty import UNCERTAINTY_KINDS  # render.py --uncertainty_kind: one folder per kind
-from utils.model_dir import METHOD_PATTERN
+from utils.model_dir import METHOD_PATTERN, UNCERTAINTY_KINDS  # one uncertainty folder per kind
 from utils.uncertainty_metrics import AUSE_VARIANTS, ause, spearman
 
 log = logging.getLogger(__name__)

@@ -50,3 +50,10 @@ def method_name(iteration: int) -> str:
 def render_dir(model_dir: Path, split: str, iteration: int) -> Path:
     """<model>/<split>/ours_N: render.py's images of one split at one iteration."""
     return Path(model_dir) / split / method_name(iteration)
+
+# render.py --uncertainty_kind: one folder `uncertainty/KIND/` per kind -> what the map shows (colour bar label)
+UNCERTAINTY_KINDS = {  # --uncertainty_kind -> what the map shows (the colour bar's label)
+    "position_variance": "positional variance",
+    "fisherrf": "FisherRF colour information x depth (training views)",
+    "fisherrf_view": "FisherRF information x depth (the view itself)",
+}

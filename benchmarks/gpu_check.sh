@@ -3,7 +3,7 @@
 # the paper-scale lite_gs and pop_gs slices. Writes 8 files to OUTDIR (default $OUT, else gpu_results/):
 #   gpu_check.log  summary.md  pytest.txt  syncs.txt  bench_gpu.json  bench_gpu.md  slice_lite_gs.json  slice_pop_gs.json
 #
-#   bash benchmarks/gpu_prepare.sh                           # here, once: wheels + data link (see README "GPU")
+#   bash benchmarks/gpu_prepare.sh                           # here, once: wheels + data link (see docs/gpu.md)
 #   bash benchmarks/gpu_check.sh [OUTDIR]                    # on the GPU machine
 #   GPU_CHECK_DEVICE=cpu bash benchmarks/gpu_check.sh /tmp/x # dry run of the plumbing on a CPU (tiny sizes)
 #

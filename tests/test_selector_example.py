@@ -1,5 +1,6 @@
-"""The README's "Adding a selector" example, executed as written: it registers, takes its option through the
-registry (validated by its config), appears among the CLI's selector options, and selects the K best scored views."""
+"""The "Adding a selector" example of docs/selectors.md, executed as written: it registers, takes its option through
+the registry (validated by its config), appears among the CLI's selector options, and selects the K best scored
+views."""
 import re
 import types
 
@@ -14,10 +15,10 @@ from tests.test_logdet import random_blocks, single_thread  # noqa: F401  (autou
 from utils.errors import UserError
 
 
-def readme_example() -> str:
-    text = (ROOT / "README.md").read_text()
+def docs_example() -> str:
+    text = (ROOT / "docs" / "selectors.md").read_text()
     match = re.search(r"<!-- example:add-a-selector -->\s*```python\n(.*?)```", text, re.S)
-    assert match, "README.md lost its add-a-selector example"
+    assert match, "docs/selectors.md lost its add-a-selector example"
     return match.group(1)
 
 
@@ -26,12 +27,12 @@ def example(monkeypatch):
     """The example module, registered in a copy of the registry that the test throws away."""
     monkeypatch.setattr(registry, "_SELECTORS", dict(registry._SELECTORS))
     module = types.ModuleType("top_gain_example")
-    exec(compile(readme_example(), "README.md:add-a-selector", "exec"), module.__dict__)
+    exec(compile(docs_example(), "docs/selectors.md:add-a-selector", "exec"), module.__dict__)
     return module
 
 
-def test_readme_example_is_short():
-    assert len(readme_example().strip().splitlines()) <= 40
+def test_docs_example_is_short():
+    assert len(docs_example().strip().splitlines()) <= 40
 
 
 def test_example_registers_and_takes_its_option(example):

@@ -152,15 +152,19 @@ def run_step(name: str, command: list[str], log_path: Path, total: int | None = 
         except OSError as exc:
             raise UserError(f"cannot run COLMAP ({command[0]}): {exc}; {INSTALL_HINT}") from exc
         assert proc.stdout is not None
-        for line in proc.stdout:
-            fh.write(line)
-            m = _PROGRESS.search(line)
-            if m:
-                bar.total = int(m.group(2))
-                bar.n = int(m.group(1))
-                bar.refresh()
-            elif _REGISTERING.search(line):
-                bar.update(1)
+        try:
+            for line in proc.stdout:
+                fh.write(line)
+                m = _PROGRESS.search(line)
+                if m:
+                    bar.total = int(m.group(2))
+                    bar.n = int(m.group(1))
+                    bar.refresh()
+                elif _REGISTERING.search(line):
+                    bar.update(1)
+        except BaseException:  # e.g. Ctrl-C: do not leave COLMAP running
+            proc.kill()
+            raise
         code = proc.wait()
     seconds = time.perf_counter() - start
     if code != 0:

@@ -190,5 +190,5 @@ def test_colmap_recovers_synthetic_capture(tmp_path):
     residual = np.linalg.norm(scale * g @ rot.T - w, axis=1).max()
     assert residual < 0.02 * np.linalg.norm(w, axis=1).max(), residual
     train = run_cli("train.py", "-s", str(data), "-m", str(tmp_path / "m"), "-i", "images_4", "--iterations", "20",
-                    "--quiet")
+                    "--quiet", timeout=600)
     assert train.returncode == 0, train.stderr

@@ -147,8 +147,8 @@ def run_step(name: str, command: list[str], log_path: Path, total: int | None = 
         fh.write(" ".join(command) + "\n")
         fh.flush()
         try:
-            proc = subprocess.Popen(_line_buffered(command), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                    errors="replace")
+            proc = subprocess.Popen(_line_buffered(command), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                    text=True, errors="replace")
         except OSError as exc:
             raise UserError(f"cannot run COLMAP ({command[0]}): {exc}; {INSTALL_HINT}") from exc
         assert proc.stdout is not None

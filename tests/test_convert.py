@@ -192,3 +192,16 @@ def test_colmap_recovers_synthetic_capture(tmp_path):
     train = run_cli("train.py", "-s", str(data), "-m", str(tmp_path / "m"), "-i", "images_4", "--iterations", "20",
                     "--quiet", timeout=600)
     assert train.returncode == 0, train.stderr
+
+
+def test_install_script_paths(tmp_path):
+    """No-op when colmap is on PATH; a clear error when apt-get is missing (no install attempted)."""
+    script = str(ROOT / "scripts" / "install_colmap.sh")
+    bash = shutil.which("bash")
+    env = fake_colmap(tmp_path)
+    fake_bin = env["PATH"].split(os.pathsep)[0]
+    done = subprocess.run([bash, script], capture_output=True, text=True, env={"PATH": fake_bin})
+    assert done.returncode == 0 and "already on PATH" in done.stdout, done.stderr
+    (tmp_path / "empty").mkdir()
+    none = subprocess.run([bash, script], capture_output=True, text=True, env={"PATH": str(tmp_path / "empty")})
+    assert none.returncode == 1 and "apt-get not available" in none.stderr

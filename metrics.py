@@ -20,6 +20,7 @@ from utils.errors import run_cli
 from utils.io import write_json
 from utils.lpips_loader import VARIANTS, default_weights_path, load_lpips
 from utils.metrics_core import Lpips, evaluate_views, find_model_dirs, mean_metrics, method_dirs
+from utils.model_dir import PER_VIEW, RESULTS
 
 
 def evaluate(model_dirs: list[str | os.PathLike], lpips_weights: str | os.PathLike | None = None,
@@ -49,8 +50,8 @@ def evaluate(model_dirs: list[str | os.PathLike], lpips_weights: str | os.PathLi
             per_view = evaluate_views(method_dir, lpips, device, quiet)
             results[method_dir.name] = mean_metrics(per_view, lpips.variant if lpips else None)
             per_view_all[method_dir.name] = per_view
-        write_json(model_dir / "results.json", results)
-        write_json(model_dir / "per_view.json", per_view_all)
+        write_json(model_dir / RESULTS, results)
+        write_json(model_dir / PER_VIEW, per_view_all)
         summary[str(model_dir)] = {m: {**r, "num_views": len(per_view_all[m]["PSNR"])} for m, r in results.items()}
     return summary
 

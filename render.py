@@ -29,6 +29,7 @@ from scene.trained import TrainedModel, load_trained
 from utils.colormap import colorize_log, log_range, save_colorbar
 from utils.errors import run_cli
 from utils.image import save_image
+from utils.model_dir import CFG_ARGS, render_dir
 
 
 @torch.no_grad()
@@ -59,7 +60,7 @@ def render_set(out_dir: Path, cameras: list[Camera], gaussians: GaussianModel, b
 def model_uncertainty(trained: TrainedModel) -> torch.Tensor:
     """u_i of every Gaussian from the Fisher blocks of the model's recorded training views (the run's sigma, ridge
     and Fisher parameter groups, from cfg_args). [N]"""
-    saved = json.loads((trained.path / "cfg_args").read_text()).get("active", {})
+    saved = json.loads((trained.path / CFG_ARGS).read_text()).get("active", {})
     active = config_from_dict(ActiveConfig, saved) if saved else ActiveConfig()
     views = recorded_train_views(trained.path, trained.iteration, len(trained.scene.train_cameras), active.method)
     return gaussian_uncertainty(trained.gaussians, trained.scene.train_cameras, views, trained.background,
@@ -79,7 +80,7 @@ def render_model(model_path: str | Path, iteration: int = -1, skip_train: bool =
     for split, cameras, skip in (("train", trained.scene.train_cameras, skip_train),
                                  ("test", trained.scene.test_cameras, skip_test)):
         if not skip and cameras:
-            render_set(trained.path / split / f"ours_{trained.iteration}", cameras, trained.gaussians,
+            render_set(render_dir(trained.path, split, trained.iteration), cameras, trained.gaussians,
                        trained.background, trained.settings, quiet, u)
     return trained.iteration
 

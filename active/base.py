@@ -94,6 +94,15 @@ class Selector:
         return dataclasses.asdict(self.config) if self.config is not None else {}
 
 
+def unscored_selection(ctx: SelectionContext, ids: list[int]) -> Selection:
+    """The `Selection` of a selector that calls no gains (`uses_oracle = False`): its picks are committed to
+    `ctx.oracle` when there is one, so that the oracle's information state matches the chosen set; no gains, count 0."""
+    if ctx.oracle is not None:
+        for view in ids:
+            ctx.oracle.commit(view)
+    return Selection(ids, [0.0] * len(ids), 0)
+
+
 def check_k(k: int) -> None:
     """K must be positive (one clear line otherwise)."""
     if k <= 0:

@@ -272,13 +272,20 @@ def _cache_budget(cache_mb: int) -> int:
     return cache_mb * (1 << 20) if cache_mb > 0 else available_memory_bytes() // 4
 
 
+def summed_views(compute: Callable[[int], torch.Tensor], views: list[int]) -> torch.Tensor:
+    """The sum of `compute(v)` over `views` (fresh tensors, added in place): the training views' prior information,
+    from blocks [N, P, P] or diagonals [N, P]."""
+    total = None
+    for v in views:
+        blocks = compute(v)
+        total = blocks if total is None else total.add_(blocks)
+    return total
+
+
 def _prior(source: FisherViewBlocks, train_views: list[int], num_views: int) -> torch.Tensor:
     """The sum of the training views' blocks (or diagonals); switches `source` to streaming when the candidates'
     cache would exceed its budget. [N, P, P] or [N, P]"""
-    prior = None
-    for v in train_views:
-        blocks = source.compute(v)
-        prior = blocks if prior is None else prior.add_(blocks)
+    prior = summed_views(source.compute, train_views)
     num_candidates = num_views - len(train_views)
     estimate = num_candidates * prior.numel() * prior.element_size()
     if not source.streaming and estimate > source.cache_bytes:

@@ -25,3 +25,9 @@ def schedule_counts(selector: Selector, pool: int = 100, num_init: int = 2, k: i
 def mean_rounded_up(counts: list[int]) -> int:
     """Average over steps, rounded up, as the paper reports (0 for no steps)."""
     return math.ceil(sum(counts) / len(counts)) if counts else 0
+
+
+def exhaustive_count(m: int, k: int) -> int:
+    """Oracle evaluations of exhaustive greedy (every remaining candidate at every pick) choosing K of M candidates:
+    sum_{j < min(K, M)} (M - j)."""
+    return sum(m - j for j in range(min(k, m)))

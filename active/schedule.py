@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 import torch
 
+from active.farthest_point import farthest_point_picks
 from utils.errors import UserError
 
 
@@ -19,14 +20,8 @@ def farthest_point_views(centers: torch.Tensor, n: int, start: int = 0) -> list[
     """
     num_views = centers.shape[0]
     assert centers.shape == (num_views, 3), f"centers must be [V,3], got {tuple(centers.shape)}"
-    chosen = [start]
-    dist = (centers - centers[start]).norm(dim=-1)  # [V]
-    while len(chosen) < n:
-        dist[chosen] = -1.0
-        nxt = int(torch.argmax(dist))
-        chosen.append(nxt)
-        dist = torch.minimum(dist, (centers - centers[nxt]).norm(dim=-1))
-    return chosen
+    others = [v for v in range(num_views) if v != start]
+    return [start] + farthest_point_picks(centers, [start], others, n - 1)
 
 
 @dataclass(frozen=True)

@@ -19,12 +19,13 @@ from pathlib import Path
 
 import torch
 
-from active.fisher import FISHER_PARAM_GROUPS, fisher_view_blocks, parameter_columns
+from active.fisher import FISHER_PARAM_GROUPS, fisher_view_blocks, parameter_columns, summed_views
 from active.logdet import BlockInformation
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 from utils.errors import UserError
+from utils.model_dir import SELECTION
 
 
 def gaussian_uncertainty(gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
@@ -33,10 +34,8 @@ def gaussian_uncertainty(gaussians: GaussianModel, cameras: list[Camera], train_
                          param_groups: str = "default") -> torch.Tensor:
     """u_i = trace of the means block of (H_train,i + delta_i I)^-1 for every Gaussian. [N] float64"""
     groups = FISHER_PARAM_GROUPS[param_groups]
-    prior = None
-    for v in train_views:
-        blocks = fisher_view_blocks(gaussians, cameras[v], background, settings, sigma, groups)
-        prior = blocks if prior is None else prior.add_(blocks)
+    prior = summed_views(lambda v: fisher_view_blocks(gaussians, cameras[v], background, settings, sigma, groups),
+                         train_views)
     information = BlockInformation(prior, delta_rel=delta_rel, delta_abs=delta_abs)
     covariance = torch.cholesky_inverse(information.chol)  # A^-1 [N, P, P]
     means = parameter_columns(gaussians, groups)["means"]
@@ -64,7 +63,7 @@ def recorded_train_views(model_path: Path, iteration: int, num_train: int, metho
             raise UserError(f"{model_path}: the scene has no training cameras, so no training views to take the "
                             "uncertainty from")
         return list(range(num_train))
-    path = model_path / "selection.json"
+    path = model_path / SELECTION
     try:
         selection = json.loads(path.read_text())
         stages, final = selection["stages"], selection.get("final")

@@ -38,14 +38,13 @@ from typing import Callable
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from gaussian_renderer import RasterSettings, rasterization
+from gaussian_renderer.fisher_partials import attribute_gram
+from gaussian_renderer.projection import camera_center, project_gaussians
+from gaussian_renderer.sh import sh_to_colors
+from scene.gaussian_model import GaussianModel
 
-from gaussian_renderer import RasterSettings, rasterization  # noqa: E402
-from gaussian_renderer.fisher_partials import attribute_gram  # noqa: E402
-from gaussian_renderer.projection import camera_center, project_gaussians  # noqa: E402
-from gaussian_renderer.sh import sh_to_colors  # noqa: E402
-from scene.gaussian_model import GaussianModel  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 SH_DEGREE = 3
 GARDEN_REL = Path("gsplat_garden") / "test_garden.npz"

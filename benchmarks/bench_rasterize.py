@@ -42,12 +42,10 @@ from typing import Callable
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from gaussian_renderer.fisher_partials import attribute_gram  # noqa: E402
-from gaussian_renderer.rasterize import bin_gaussians, rasterize  # noqa: E402
-from gaussian_renderer.reference import rasterize_reference  # noqa: E402
-from gaussian_renderer.settings import RasterSettings  # noqa: E402
+from gaussian_renderer.fisher_partials import attribute_gram
+from gaussian_renderer.rasterize import bin_gaussians, rasterize
+from gaussian_renderer.reference import rasterize_reference
+from gaussian_renderer.settings import RasterSettings
 
 GARDEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "gsplat_garden" / "test_garden.npz"
 LEGO = Path(__file__).resolve().parents[2] / "shared" / "data" / "lego"
@@ -149,7 +147,7 @@ def resolution_scaling(args: argparse.Namespace, settings: RasterSettings) -> li
     """Per-step time of each model at each width (one training step: render, loss, backward)."""
     from gaussian_renderer.renderer import render
     from scene.dataset_readers import load_scene_info
-    from utils.losses import l1_loss, ssim
+    from utils.losses import photometric_loss
 
     rows = []
     models = scaling_models(args.source, args.model, args.num_random_points)
@@ -162,7 +160,7 @@ def resolution_scaling(args: argparse.Namespace, settings: RasterSettings) -> li
         for name, gaussians in models:
             def step() -> None:
                 out = render(camera, gaussians, bg, settings)
-                loss = 0.8 * l1_loss(out.image, camera.image) + 0.2 * (1 - ssim(out.image, camera.image))
+                loss = photometric_loss(out.image, camera.image)
                 loss.backward()
                 for p in gaussians.params.values():
                     p.grad = None

@@ -30,15 +30,13 @@ from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from active import SelectionContext, build_selector, list_selectors, selector_options  # noqa: E402
-from active.fisher import fisher_view_blocks  # noqa: E402
-from active.logdet import BlockGainOracle, BlockInformation  # noqa: E402
-from active.schedule import farthest_point_views  # noqa: E402
-from gaussian_renderer import render  # noqa: E402
-from scene.trained import load_trained  # noqa: E402
-from utils.losses import l1_loss, ssim  # noqa: E402
+from active import SelectionContext, build_selector, list_selectors, selector_options
+from active.fisher import fisher_view_blocks
+from active.logdet import BlockGainOracle, BlockInformation
+from active.schedule import farthest_point_views
+from gaussian_renderer import render
+from scene.trained import load_trained
+from utils.losses import photometric_loss
 
 
 RESULTS_DIR = Path(__file__).parent / "results"
@@ -117,7 +115,7 @@ def main() -> None:
 
     def train_step(v):
         out = render(cams[v], gaussians, bg, settings)
-        loss = 0.8 * l1_loss(out.image, cams[v].image) + 0.2 * (1 - ssim(out.image, cams[v].image))
+        loss = photometric_loss(out.image, cams[v].image)
         loss.backward()
 
     def blocks(v):

@@ -27,6 +27,8 @@ fi
 mkdir -p "$OUTDIR"
 LOG="$OUTDIR/gpu_check.log"
 export PYTHONUNBUFFERED=1
+# The device machine's python has no editable install of the project (scripts/setup_env.sh): import it from here.
+export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}"
 START=$SECONDS
 left() { echo $((TOTAL_S - (SECONDS - START))); }
 say() { echo "[$((SECONDS - START)) s] $*" | tee -a "$LOG"; }

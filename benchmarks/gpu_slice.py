@@ -2,7 +2,8 @@
 
     python benchmarks/gpu_slice.py --method lite_gs --data ../shared/data/lego --device cuda --budget_s 180
 
-Runs train.py's own steps (`open_run`, `training_step`, `acquire`) with the flags of `scripts/setup1.sh` at
+Runs the training engine's steps (`open_run`, `training_step`, `acquire`) with Setup 1's flags (read from
+`experiments/protocols.py`, as `scripts/setup1.sh` runs it) at
 `--iter_scale 1 --num_points 100000 --resolution 1` (800 px; 2 seed views, +3 per step to 11, 100 iterations per
 view and stage, 11,000 in total) in streaming Fisher mode, for about --budget_s seconds: stage 0's training (cut at
 half the budget), the first acquisition, then training again until the budget is spent. Records s/iteration, Fisher
@@ -15,26 +16,29 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import torch
 from tqdm import tqdm
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from active.registry import selector_options
+from experiments.protocols import DEFAULT_EPS, PROTOCOLS, RunScale, expand
+from training.config import parse_config
+from training.engine import Run, acquire, open_run
+from training.step import next_view, training_step
+from utils.errors import run_cli
 
-import train  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def setup1_flags(data: str, model: str, method: str, device: str, resolution: int, num_points: int) -> list[str]:
-    """train.py flags of scripts/setup1.sh at --iter_scale 1 (one seed), streaming Fisher mode."""
+    """train.py flags of Setup 1 (`experiments/protocols.py`, as scripts/setup1.sh runs it) at --iter_scale 1, seed 0,
+    streaming Fisher mode."""
+    run = expand("setup1", [Path(data).name], [method], 1, DEFAULT_EPS, lambda m: "eps" in selector_options(m))[0]
+    schedule = run.schedule_args(PROTOCOLS["setup1"], RunScale(resolution, 1.0, num_points))
     return ["-s", data, "-m", model, "--eval", "-r", str(resolution), "--white_background", "--device", device,
-            "--seed", "0", "--method", method, "--eps", "0.1", "--num_init_views", "2", "--views_per_step", "3",
-            "--max_views", "11", "--iters_per_view", "100", "--iterations", "11000", "--num_random_points",
-            str(num_points), "--densify_from_iter", "500", "--opacity_reset_interval", "3000", "--fisher_mode",
-            "streaming", "--quiet", "--overwrite"]
+            *schedule, "--fisher_mode", "streaming", "--quiet", "--overwrite"]
 
 
 def sync(device: str) -> None:
@@ -42,13 +46,13 @@ def sync(device: str) -> None:
         torch.cuda.synchronize()
 
 
-def train_for(run: train.Run, until_iteration: int, deadline: float, device: str) -> tuple[int, float]:
+def train_for(run: Run, until_iteration: int, deadline: float, device: str) -> tuple[int, float]:
     """Train up to `until_iteration` or the deadline; returns (iterations done, seconds)."""
     state, start = run.state, run.state.iteration
     t0 = time.perf_counter()
     while state.iteration < until_iteration and time.perf_counter() < deadline:
-        cam = run.scene.train_cameras[train.next_view(state, run.rng)]
-        train.training_step(state, cam, run.cfg, run.background, run.settings, run.lr_schedule, run.scene.extent)
+        cam = run.scene.train_cameras[next_view(state, run.rng)]
+        training_step(state, cam, run.cfg, run.background, run.settings, run.lr_schedule, run.scene.extent)
         if state.iteration % 10 == 0:
             sync(device)
     sync(device)
@@ -71,9 +75,9 @@ def main() -> None:
     model = args.model or str(out / f"slice_{args.method}_model")
     t_start = time.perf_counter()
     deadline = t_start + args.budget_s
-    cfg = train.parse_config(setup1_flags(args.data, model, args.method, args.device, args.resolution,
+    cfg = parse_config(setup1_flags(args.data, model, args.method, args.device, args.resolution,
                                           args.num_points))
-    run = train.open_run(cfg, model)
+    run = open_run(cfg, model)
     load_s = time.perf_counter() - t_start
     if args.device == "cuda":
         torch.cuda.reset_peak_memory_stats()
@@ -84,7 +88,7 @@ def main() -> None:
     (out / f"slice_{args.method}.json").write_text(json.dumps(partial, indent=2) + "\n")  # kept if killed later
     progress = tqdm(disable=True)
     t0 = time.perf_counter()
-    train.acquire(run, progress)
+    acquire(run, progress)
     sync(args.device)
     acquire_s = time.perf_counter() - t0
     record = run.state.stages[0]
@@ -125,4 +129,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    train.run_cli(main)
+    run_cli(main)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import collections
-import sys
 import tempfile
 import traceback
 import warnings
@@ -20,10 +19,12 @@ from pathlib import Path
 
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from training.config import parse_config
+from training.engine import open_run
+from training.step import next_view, training_step
+from utils.errors import run_cli
 
-import train  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 STEPS = 20
 
@@ -99,15 +100,15 @@ def main() -> None:
     parser.add_argument("--num_points", default="20000")
     args = parser.parse_args()
     model = tempfile.mkdtemp(prefix="gpu_syncs_")
-    cfg = train.parse_config(["-s", args.data, "-m", model, "--eval", "-r", args.resolution, "--white_background",
+    cfg = parse_config(["-s", args.data, "-m", model, "--eval", "-r", args.resolution, "--white_background",
                               "--device", args.device, "--method", "lite_gs", "--num_random_points", args.num_points,
                               "--densify_from_iter", "5", "--densification_interval", "10", "--quiet"])
-    run = train.open_run(cfg, model)
+    run = open_run(cfg, model)
     state = run.state
 
     def step():
-        cam = run.scene.train_cameras[train.next_view(state, run.rng)]
-        train.training_step(state, cam, run.cfg, run.background, run.settings, run.lr_schedule, run.scene.extent)
+        cam = run.scene.train_cameras[next_view(state, run.rng)]
+        training_step(state, cam, run.cfg, run.background, run.settings, run.lr_schedule, run.scene.extent)
 
     from active.fisher import FisherOracle
     oracle = FisherOracle.build(state.gaussians, run.scene.train_cameras, state.train_views[:1], run.background,
@@ -140,4 +141,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    train.run_cli(main)
+    run_cli(main)

@@ -11,6 +11,7 @@ import fcntl
 import json
 import logging
 import os
+import shlex
 import signal
 import subprocess
 import time
@@ -19,6 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from submitit.helpers import Checkpointable
+
+from utils.model_dir import CFG_ARGS, CHECKPOINTS_DIR, RESULTS, RUN_STATUS, method_name, render_dir
 
 log = logging.getLogger(__name__)
 THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")  # torch, BLAS and numba thread pools
@@ -34,7 +37,7 @@ def read_json(path: Path) -> Any:
 
 def trained_iteration(model_dir: Path) -> int | None:
     """The final iteration when run_status.json says the training is complete, else None."""
-    status = read_json(model_dir / "run_status.json")
+    status = read_json(model_dir / RUN_STATUS)
     if isinstance(status, dict) and status.get("status") == "complete":
         return int(status.get("iteration", -1))
     return None
@@ -44,20 +47,20 @@ def is_finished(model_dir: Path, uncertainty: bool = False) -> bool:
     """Trained, rendered and scored: results.json holds the final iteration's entry (with `uncertainty`, one that
     carries the uncertainty metrics)."""
     iteration = trained_iteration(model_dir)
-    results = read_json(model_dir / "results.json")
-    entry = results.get(f"ours_{iteration}") if iteration is not None and isinstance(results, dict) else None
+    results = read_json(model_dir / RESULTS)
+    entry = results.get(method_name(iteration)) if iteration is not None and isinstance(results, dict) else None
     return isinstance(entry, dict) and (not uncertainty or "AUSE" in entry)
 
 
 def is_rendered(model_dir: Path, iteration: int, uncertainty: bool = False) -> bool:
     """The test views of `iteration` are rendered (with `uncertainty`, their uncertainty maps too)."""
-    rendered = model_dir / "test" / f"ours_{iteration}"
+    rendered = render_dir(model_dir, "test", iteration)
     return (rendered / "renders").is_dir() and (not uncertainty or (rendered / "uncertainty").is_dir())
 
 
 def is_started(model_dir: Path) -> bool:
     """train.py has written something a rerun resumes from (cfg_args, checkpoints)."""
-    return (model_dir / "cfg_args").is_file() or (model_dir / "checkpoints").is_dir()
+    return (model_dir / CFG_ARGS).is_file() or (model_dir / CHECKPOINTS_DIR).is_dir()
 
 
 def error_line(text: str) -> str:
@@ -192,3 +195,21 @@ class GridJob(Checkpointable):
         """submitit's preemption/timeout hook: stop train.py and requeue this job (it resumes from disk)."""
         self._stop_child()
         return super().checkpoint(*args, **kwargs)
+
+
+def train_command(spec: JobSpec) -> str:
+    return shlex.join(spec.commands(spec.device)[0][1])
+
+
+def lock_held(spec: JobSpec) -> bool:
+    """Whether another process (e.g. a job of an earlier, killed runner) is working on this run right now."""
+    if not spec.lock_path.is_file():
+        return False
+    fd = os.open(spec.lock_path, os.O_RDWR)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return False
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)

@@ -16,11 +16,10 @@ import torch
 from gaussian_renderer.compiled import use_compiled
 from gaussian_renderer.projection import camera_center, project_gaussians
 from gaussian_renderer.projection_partials import projection_jacobian_closed_form
-from gaussian_renderer.rasterize import (NUM_GEOMETRY_ATTRIBUTES, _alpha_partials, _check_inputs,
-                                         _color_alpha_partials, _composite, _from_image, _iterate_chunks,
-                                         _scatter_rows, bin_gaussians)
 from gaussian_renderer.settings import RasterSettings
 from gaussian_renderer.sh import num_sh_bases, sh_to_colors
+from gaussian_renderer.tiles import (NUM_GEOMETRY_ATTRIBUTES, alpha_partials, bin_gaussians, check_inputs,
+                                     color_alpha_partials, composite, from_image, iterate_chunks, scatter_rows)
 from utils.errors import UserError
 
 
@@ -42,7 +41,7 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
         float64 Gram matrices. [N, A, A], A = 6 + D
     """
     settings = settings or RasterSettings()
-    _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
+    check_inputs(means2d, conics, opacities, colors, depths, radii, background)
     assert weights is None or weights.shape == (height, width), f"weights must be [H,W], got {tuple(weights.shape)}"
     if use_compiled(settings.backend, means2d):
         from gaussian_renderer.compiled.ops import attribute_gram_compiled
@@ -51,15 +50,15 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
     n, d = colors.shape
     geo = NUM_GEOMETRY_ATTRIBUTES
     bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
-    pixel_weights = None if weights is None else _from_image(weights[None].to(means2d.dtype), bins)[..., 0]  # [T, P]
-    final_color = _composite(bins, means2d, conics, opacities, colors, background, settings)[0].transpose(1, 2)
+    pixel_weights = None if weights is None else from_image(weights[None].to(means2d.dtype), bins)[..., 0]  # [T, P]
+    final_color = composite(bins, means2d, conics, opacities, colors, background, settings)[0].transpose(1, 2)
     final_color = final_color.contiguous()  # [T, D, P]
     prefix = torch.zeros_like(final_color)
     # Per Gaussian: [v (|u|^2 v)^T | v (w u)^T] (6 x (6 + D)) and sum w^2, accumulated in float64 across tiles.
     sums = torch.zeros(n, geo * (geo + d) + 1, dtype=torch.float64, device=means2d.device)
-    for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
-        u = _color_alpha_partials(chunk, colors, final_color, prefix)  # [Ta, c, D, P]
-        v = _alpha_partials(chunk, conics, dim=2)  # [Ta, c, 6, P]
+    for chunk in iterate_chunks(bins, means2d, conics, opacities, settings):
+        u = color_alpha_partials(chunk, colors, final_color, prefix)  # [Ta, c, D, P]
+        v = alpha_partials(chunk, conics, dim=2)  # [Ta, c, 6, P]
         t, c, _, p = v.shape
         uu, w = (u * u).sum(2, keepdim=True), chunk.weight[:, :, None, :]  # [Ta, c, 1, P] each
         ww = w * w
@@ -71,7 +70,7 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
         prod = torch.bmm(v.reshape(t * c, geo, p), right.reshape(t * c, geo + d, p).transpose(1, 2))
         ww = ww.sum((2, 3)).reshape(t * c, 1)
         rows = torch.cat([prod.reshape(t * c, -1), ww], dim=1).double()
-        sums += _scatter_rows(rows.reshape(t, c, -1), chunk.ids, n)
+        sums += scatter_rows(rows.reshape(t, c, -1), chunk.ids, n)
     prod = sums[:, :-1].reshape(n, geo, geo + d)
     gram = torch.zeros(n, geo + d, geo + d, dtype=torch.float64, device=means2d.device)
     gram[:, :geo, :] = prod
@@ -101,17 +100,17 @@ def pixel_attribute_partials(means2d: torch.Tensor, conics: torch.Tensor, opacit
     keep their colour and background terms but have zero alpha derivative.
     """
     settings = settings or RasterSettings()
-    _check_inputs(means2d, conics, opacities, colors, depths, radii, background)
+    check_inputs(means2d, conics, opacities, colors, depths, radii, background)
     d = colors.shape[1]
     bins = bin_gaussians(means2d, conics, opacities, radii, depths, width, height, settings)
-    final_color = _composite(bins, means2d, conics, opacities, colors, background, settings)[0].transpose(1, 2)
+    final_color = composite(bins, means2d, conics, opacities, colors, background, settings)[0].transpose(1, 2)
     final_color = final_color.contiguous()  # [T, D, P]
     prefix = torch.zeros_like(final_color)
     pix, gid, jacs = [], [], []
     eye = torch.eye(d, dtype=means2d.dtype, device=means2d.device)
-    for chunk in _iterate_chunks(bins, means2d, conics, opacities, settings):
-        u = _color_alpha_partials(chunk, colors, final_color, prefix).transpose(2, 3)  # [Ta, c, P, D]
-        v = _alpha_partials(chunk, conics)  # [Ta, c, P, 6]
+    for chunk in iterate_chunks(bins, means2d, conics, opacities, settings):
+        u = color_alpha_partials(chunk, colors, final_color, prefix).transpose(2, 3)  # [Ta, c, P, D]
+        v = alpha_partials(chunk, conics)  # [Ta, c, P, 6]
         jac = torch.cat([u[..., :, None] * v[..., None, :],
                          chunk.weight[..., None, None] * eye], dim=-1)  # [Ta, c, P, D, A]
         mask = chunk.alpha > 0

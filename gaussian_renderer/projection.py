@@ -76,6 +76,30 @@ def covariance_3d(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
     return m @ m.transpose(1, 2)
 
 
+def near_plane_depths(z: torch.Tensor, near_plane: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """(in_front [N] bool: z > near_plane, z_safe [N]: z there and 1 behind, so culled rows stay finite)."""
+    in_front = z > near_plane
+    return in_front, torch.where(in_front, z, torch.ones_like(z))
+
+
+def frustum_limits(fx: torch.Tensor, fy: torch.Tensor, cx: torch.Tensor, cy: torch.Tensor, width: int,
+                   height: int) -> tuple[tuple[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]:
+    """((neg, pos) of x/z, (neg, pos) of y/z): where 3DGS clamps the ratios before building the EWA Jacobian, the
+    image edges plus a margin of `FRUSTUM_MARGIN` tan(fov/2) (fov from fx/width and fy/height), each edge measured
+    from the principal point; the ratio stays in [-neg, pos]."""
+    margin_x, margin_y = FRUSTUM_MARGIN * width / (2 * fx), FRUSTUM_MARGIN * height / (2 * fy)
+    pos_x, neg_x = (width - cx) / fx + margin_x, cx / fx + margin_x
+    pos_y, neg_y = (height - cy) / fy + margin_y, cy / fy + margin_y
+    return (neg_x, pos_x), (neg_y, pos_y)
+
+
+def clamp_ratio(coord: torch.Tensor, z_safe: torch.Tensor, neg: torch.Tensor,
+                pos: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """coord / z clamped to [-neg, pos] (`frustum_limits`), and where the clamp is inactive (derivative 1). [N] each"""
+    ratio = coord / z_safe
+    return torch.minimum(torch.maximum(ratio, -neg), pos), (ratio > -neg) & (ratio < pos)
+
+
 @dataclass
 class Projection:
     """Screen-space Gaussians. Pixel (x, y) has its centre at (x + 0.5, y + 0.5)."""
@@ -123,14 +147,10 @@ def project_gaussians(means: torch.Tensor, quats: torch.Tensor, scales: torch.Te
     rot, trans = viewmat[:3, :3].to(means.dtype), viewmat[:3, 3].to(means.dtype)
     t = means @ rot.T + trans  # [N, 3] camera space
     z = t[:, 2]
-    in_front = z > near_plane
-    z_safe = torch.where(in_front, z, torch.ones_like(z))  # keeps culled rows finite (and their gradients 0)
-
-    margin_x, margin_y = FRUSTUM_MARGIN * width / (2 * fx), FRUSTUM_MARGIN * height / (2 * fy)
-    lim_x_pos, lim_x_neg = (width - cx) / fx + margin_x, cx / fx + margin_x
-    lim_y_pos, lim_y_neg = (height - cy) / fy + margin_y, cy / fy + margin_y
-    tx = z_safe * torch.minimum(torch.maximum(t[:, 0] / z_safe, -lim_x_neg), lim_x_pos)  # [N]
-    ty = z_safe * torch.minimum(torch.maximum(t[:, 1] / z_safe, -lim_y_neg), lim_y_pos)
+    in_front, z_safe = near_plane_depths(z, near_plane)  # z_safe keeps culled rows finite (and their gradients 0)
+    (neg_x, pos_x), (neg_y, pos_y) = frustum_limits(fx, fy, cx, cy, width, height)
+    tx = z_safe * clamp_ratio(t[:, 0], z_safe, neg_x, pos_x)[0]  # [N]
+    ty = z_safe * clamp_ratio(t[:, 1], z_safe, neg_y, pos_y)[0]
     zeros = torch.zeros_like(z_safe)
     jac = torch.stack([fx / z_safe, zeros, -fx * tx / z_safe**2,
                        zeros, fy / z_safe, -fy * ty / z_safe**2], dim=-1).reshape(n, 2, 3)  # [N, 2, 3]

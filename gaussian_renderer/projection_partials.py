@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import torch
 
-from gaussian_renderer.projection import FRUSTUM_MARGIN, camera_center, quat_to_rotmat
+from gaussian_renderer.projection import (camera_center, clamp_ratio, frustum_limits, near_plane_depths,
+                                         quat_to_rotmat)
 from gaussian_renderer.sh import C0, C1, C2, C3, eval_sh, num_sh_bases
 
 
@@ -79,24 +80,19 @@ def projection_jacobian_closed_form(means: torch.Tensor, quats: torch.Tensor, lo
     rot, trans = viewmat[:3, :3].to(dtype), viewmat[:3, 3].to(dtype)
     t = means @ rot.T + trans  # [N, 3]
     z = t[:, 2]
-    in_front = z > near_plane
-    z_s = torch.where(in_front, z, torch.ones_like(z))
+    in_front, z_s = near_plane_depths(z, near_plane)
     # Tangents w.r.t. the means: dt/dm_p = rot[:, p]; z_safe is constant behind the near plane.
     dt = rot.T[None].expand(n, 3, 3)  # [N, P=3, 3]
     dz = dt[..., 2] * in_front[:, None]  # [N, 3]
     means2d_jac = torch.stack([fx * (dt[..., 0] * z_s[:, None] - t[:, 0:1] * dz),
                                fy * (dt[..., 1] * z_s[:, None] - t[:, 1:2] * dz)], 1) / (z_s * z_s)[:, None, None]
 
-    margin_x, margin_y = FRUSTUM_MARGIN * width / (2 * fx), FRUSTUM_MARGIN * height / (2 * fy)
-    lims = ((cx / fx + margin_x, (width - cx) / fx + margin_x), (cy / fy + margin_y, (height - cy) / fy + margin_y))
     tc, dtc = [], []
-    for axis, (neg, pos) in enumerate(lims):
-        ratio = t[:, axis] / z_s
-        clamped = torch.minimum(torch.maximum(ratio, -neg), pos)
-        inside = ((ratio > -neg) & (ratio < pos))[:, None]
+    for axis, (neg, pos) in enumerate(frustum_limits(fx, fy, cx, cy, width, height)):
+        clamped, inside = clamp_ratio(t[:, axis], z_s, neg, pos)  # [N] each
         d_ratio = (dt[..., axis] * z_s[:, None] - t[:, axis:axis + 1] * dz) / (z_s * z_s)[:, None]
         tc.append(z_s * clamped)
-        dtc.append(dz * clamped[:, None] + z_s[:, None] * d_ratio * inside)  # [N, 3]
+        dtc.append(dz * clamped[:, None] + z_s[:, None] * d_ratio * inside[:, None])  # [N, 3]
     zeros = torch.zeros_like(z_s)
     jac = torch.stack([fx / z_s, zeros, -fx * tc[0] / z_s**2,
                        zeros, fy / z_s, -fy * tc[1] / z_s**2], -1).reshape(n, 2, 3)

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import torch
 
-from gaussian_renderer.rasterize import tile_ranges
 from gaussian_renderer.settings import RasterSettings
+from gaussian_renderer.tiles import tile_ranges
 
 
 def rasterize_reference(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, colors: torch.Tensor,

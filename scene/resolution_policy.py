@@ -14,6 +14,7 @@ from pathlib import Path
 from PIL import Image
 
 from scene.frames import IMAGE_SUFFIXES, target_size
+from scene.transforms_json import image_path
 from utils.errors import UserError
 
 CUDA_MAX_WIDTH = 1600  # the 3DGS rule: wider images are scaled to this width
@@ -34,21 +35,32 @@ class ResolutionChoice:
 def probe_image_size(source_path: str, images: str = "images") -> tuple[int, int] | None:
     """(width, height) of a dataset's first training image, or None when it cannot be found or read.
 
-    Blender: the first frame of `transforms_train.json`; COLMAP: the first image file of `images/` by name.
+    Blender (`transforms_train.json`) and nerfstudio / instant-ngp (`transforms.json`): the first listed frame's
+    image file, else that frame's (or the file's) `w` and `h`; COLMAP: the first image file of `images/` by name.
     None leaves every complaint to the dataset reader, which names the problem precisely.
     """
     source = Path(source_path)
     try:
-        if (source / "transforms_train.json").is_file():
-            frame = json.loads((source / "transforms_train.json").read_text())["frames"][0]
-            path = source / frame["file_path"]
-            if not path.is_file() and path.suffix.lower() not in IMAGE_SUFFIXES:
-                path = path.with_name(path.name + ".png")  # NeRF-synthetic frames omit the suffix
-        else:
-            path = min(p for p in (source / images).iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        for name in ("transforms_train.json", "transforms.json"):
+            if (source / name).is_file():
+                return _first_frame_size(source, json.loads((source / name).read_text()))
+        path = min(p for p in (source / images).iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
         with Image.open(path) as im:
             return im.size
-    except (OSError, ValueError, KeyError, IndexError, TypeError):
+    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError):
+        return None
+
+
+def _first_frame_size(source: Path, data: dict) -> tuple[int, int] | None:
+    """The size of the first frame of a transforms file: its image file, else its declared `w` x `h`."""
+    frame = data["frames"][0]
+    try:
+        with Image.open(image_path(source, frame["file_path"])) as im:
+            return im.size
+    except OSError:
+        w, h = frame.get("w", data.get("w")), frame.get("h", data.get("h"))
+        if isinstance(w, (int, float)) and isinstance(h, (int, float)) and w >= 1 and h >= 1:
+            return int(w), int(h)
         return None
 
 

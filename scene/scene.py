@@ -13,6 +13,7 @@ from scene.cameras import Camera
 from scene.dataset_readers import PointCloud, SceneInfo, load_scene_info
 from scene.gaussian_model import GaussianModel
 from utils.io import write_json
+from utils.model_dir import CAMERAS, point_cloud_ply
 
 log = logging.getLogger(__name__)
 
@@ -91,11 +92,11 @@ class Scene:
         The training view with view id v (selection.json, --init_views) therefore has id `len(test_cameras) + v`.
         """
         cameras = self.test_cameras + self.train_cameras
-        write_json(self.model_path / "cameras.json", [c.to_json(i) for i, c in enumerate(cameras)])
+        write_json(self.model_path / CAMERAS, [c.to_json(i) for i, c in enumerate(cameras)])
 
     def save_gaussians(self, gaussians: GaussianModel, iteration: int) -> Path:
         """Write `point_cloud/iteration_N/point_cloud.ply` and return its path."""
-        path = self.model_path / "point_cloud" / f"iteration_{iteration}" / "point_cloud.ply"
+        path = point_cloud_ply(self.model_path, iteration)
         path.parent.mkdir(parents=True, exist_ok=True)
         gaussians.save_ply(path)
         return path

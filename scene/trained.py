@@ -19,6 +19,7 @@ from gaussian_renderer import RasterSettings
 from scene.gaussian_model import GaussianModel
 from scene.scene import Scene
 from utils.errors import UserError
+from utils.model_dir import CFG_ARGS, POINT_CLOUD_DIR, point_cloud_ply
 
 
 @dataclass
@@ -48,7 +49,7 @@ def background_color(model_cfg: ModelConfig, device: str | torch.device | None =
 
 def load_model_config(model_path: Path) -> tuple[ModelConfig, PipelineConfig]:
     """The model and pipeline configs saved by train.py in `cfg_args`."""
-    cfg_file = model_path / "cfg_args"
+    cfg_file = model_path / CFG_ARGS
     if not cfg_file.is_file():
         raise UserError(f"{model_path} has no cfg_args: it is not a model directory written by train.py")
     try:
@@ -60,8 +61,9 @@ def load_model_config(model_path: Path) -> tuple[ModelConfig, PipelineConfig]:
 
 def find_iteration(model_path: Path, iteration: int = -1) -> int:
     """The requested saved iteration, or the largest one when `iteration` is -1."""
-    found = sorted(int(m.group(1)) for p in (model_path / "point_cloud").glob("iteration_*")
-                   if (m := re.match(r"iteration_(\d+)$", p.name)) and (p / "point_cloud.ply").is_file())
+    found = sorted(int(m.group(1)) for p in (model_path / POINT_CLOUD_DIR).glob("iteration_*")
+                   if (m := re.match(r"iteration_(\d+)$", p.name))
+                   and point_cloud_ply(model_path, int(m.group(1))).is_file())
     if not found:
         raise UserError(f"{model_path} has no point_cloud/iteration_*/point_cloud.ply: train it first (train.py)")
     if iteration == -1:
@@ -81,7 +83,7 @@ def load_trained(model_path: str | Path, iteration: int = -1, source_path: str |
     device = device or model_cfg.device
     iteration = find_iteration(model_path, iteration)
     scene = Scene.from_config(model_cfg, model_path, source_path, device)
-    gaussians = GaussianModel.load_ply(model_path / "point_cloud" / f"iteration_{iteration}" / "point_cloud.ply",
+    gaussians = GaussianModel.load_ply(point_cloud_ply(model_path, iteration),
                                        device=device)
     return TrainedModel(model_path, model_cfg, pipeline_cfg, iteration, scene, gaussians,
                         background_color(model_cfg, device), raster_settings(pipeline_cfg))

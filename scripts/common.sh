@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # Shared by the experiment wrappers (setup*.sh, ablation_ssg.sh): run scripts/grid.py for one setup.
 # The protocols live in experiments/protocols.py; every option of grid.py works here too (see --help).
-# Defaults: --launcher local, one job at a time. Environment: PYTHON (interpreter), EXTRA_TRAIN_ARGS (appended to
-# every train.py call, e.g. "--sh_degree 1").
+# Defaults: --launcher local, one job at a time. Environment: PYTHON (interpreter; default: the project's virtualenv
+# .venv, created by scripts/setup_env.sh as quickstart.sh does when a fresh clone has none), EXTRA_TRAIN_ARGS
+# (appended to every train.py call, e.g. "--sh_degree 1").
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 if [ -n "${PYTHON:-}" ]; then PY="$PYTHON"
 elif [ -x "$ROOT/.venv/bin/python" ]; then PY="$ROOT/.venv/bin/python"
-else PY="python"; fi
+else PY="$(bash "$ROOT/scripts/setup_env.sh" | tail -n 1)"; fi
 
 # run_grid SETUP [grid.py options...]
 run_grid() {

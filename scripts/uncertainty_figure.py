@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import matplotlib
@@ -18,16 +17,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from utils.errors import UserError, run_cli  # noqa: E402
 from utils.metrics_core import method_dirs, read_rgb  # noqa: E402
+from utils.model_dir import PER_VIEW, method_name  # noqa: E402
 
 
 def make_figure(model: Path, view: int, out: Path, iteration: int | None = None) -> Path:
     """Write the four-panel PNG of test view `view` to `out`; returns `out`."""
     dirs = method_dirs(model)
     if iteration is not None:
-        dirs = [d for d in dirs if d.name == f"ours_{iteration}"]
+        dirs = [d for d in dirs if d.name == method_name(iteration)]
     if not dirs:
         raise UserError(f"{model}: no test/ours_N renders{'' if iteration is None else f' for {iteration}'}; "
                         "run render.py --uncertainty first")
@@ -52,7 +51,7 @@ def make_figure(model: Path, view: int, out: Path, iteration: int | None = None)
     for ax, title in zip(axes, titles):
         ax.set_title(title, fontsize=9)
         ax.axis("off")
-    per_view = model / "per_view.json"
+    per_view = model / PER_VIEW
     if per_view.is_file():
         scores = json.loads(per_view.read_text()).get(method_dir.name, {})
         if "Spearman" in scores:

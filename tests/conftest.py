@@ -1,7 +1,11 @@
-"""Shared test set-up: repository root on sys.path, the shared data directory, tiny generated datasets."""
+"""Shared test set-up: the shared data directory, tiny generated datasets, running the CLIs (the repository root is
+on the import path through pytest.ini's `pythonpath`, the editable install for everything else), and a guard that
+fails any test reaching the rasterizer with backend="auto" unless it opts in."""
 from __future__ import annotations
 
+import importlib
 import os
+import pkgutil
 import subprocess
 import sys
 from pathlib import Path
@@ -10,10 +14,47 @@ import pytest
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 SHARED = Path(os.environ.get("LITEGS_SHARED", ROOT.parent / "shared"))
+
+
+def _modules_binding(function) -> list:
+    """Every gaussian_renderer module that holds `function` under its own name (imports them all once)."""
+    import gaussian_renderer
+    for info in pkgutil.walk_packages(gaussian_renderer.__path__, "gaussian_renderer."):
+        importlib.import_module(info.name)
+    return [module for name, module in sorted(sys.modules.items())
+            if name.startswith("gaussian_renderer") and getattr(module, function.__name__, None) is function]
+
+
+_BACKEND_BINDINGS: list = []
+
+
+@pytest.fixture(autouse=True)
+def _no_implicit_auto_backend(request, monkeypatch):
+    """Fail loudly when a CPU rasterizer or Fisher-partials call resolves backend="auto".
+
+    "auto" silently picks one backend (compiled when numba imports), so a test relying on it checks only that one;
+    tests pass backend="torch" / "compiled" explicitly (usually parametrized over both). Tests about "auto" itself,
+    or that run the user's default end to end in-process, opt in with @pytest.mark.auto_backend.
+    """
+    if request.node.get_closest_marker("auto_backend"):
+        yield
+        return
+    from gaussian_renderer import compiled
+    real = compiled.use_compiled
+    if not _BACKEND_BINDINGS:
+        _BACKEND_BINDINGS.extend(_modules_binding(real))
+
+    def guarded(backend: str, tensor: torch.Tensor) -> bool:
+        if backend == "auto" and tensor.device.type == "cpu":
+            raise AssertionError('test reached the rasterizer with backend="auto" (the compiled path only); pass '
+                                 'backend="torch" or "compiled" explicitly, or mark the test @pytest.mark.auto_backend')
+        return real(backend, tensor)
+
+    for module in _BACKEND_BINDINGS:
+        monkeypatch.setattr(module, "use_compiled", guarded)
+    yield
 
 
 @pytest.fixture(autouse=True)

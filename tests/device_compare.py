@@ -26,7 +26,7 @@ FISHER_RTOL = 1e-4  # Fisher blocks, relative to the largest magnitude of the re
 
 W, H = 48, 40
 SH_DEGREE = 3
-SETTINGS = RasterSettings(tile_size=8, chunk_size=8)
+BACKENDS = ("torch", "compiled")  # CPU backends; CUDA tensors always take the torch path
 PARAM_NAMES = ("means", "quats", "log_scales", "logit_opacities", "sh_coeffs")
 
 
@@ -48,13 +48,20 @@ class RenderResult:
     grads: dict[str, torch.Tensor]  # raw parameter -> gradient of the loss
 
 
-def render_with_grads(device: str, dtype: torch.dtype = torch.float32, n: int = 120, seed: int = 0) -> RenderResult:
-    """Render the scene on `device` in `dtype` and back-propagate a fixed random loss of image and alpha."""
+def settings(backend: str) -> RasterSettings:
+    """The comparison's raster settings with the rasterizer backend named explicitly ("torch" or "compiled")."""
+    return RasterSettings(tile_size=8, chunk_size=8, backend=backend)
+
+
+def render_with_grads(device: str, dtype: torch.dtype = torch.float32, n: int = 120, seed: int = 0,
+                      backend: str = "torch") -> RenderResult:
+    """Render the scene on `device` in `dtype` with `backend` and back-propagate a fixed random loss of image and
+    alpha."""
     raw = {k: v.to(dtype=dtype, device=device).requires_grad_(True) for k, v in scene_params(n, seed).items()}
     view, K = scene_camera(dtype, device)
     out = rasterization(raw["means"], raw["quats"], torch.exp(raw["log_scales"]), torch.sigmoid(raw["logit_opacities"]),
                         raw["sh_coeffs"], view, K, W, H, sh_degree=SH_DEGREE,
-                        background=torch.tensor([0.1, 0.2, 0.3], dtype=dtype, device=device), settings=SETTINGS)
+                        background=torch.tensor([0.1, 0.2, 0.3], dtype=dtype, device=device), settings=settings(backend))
     g = torch.Generator().manual_seed(seed + 1)
     w_image = torch.randn(3, H, W, generator=g, dtype=torch.float64).to(dtype=dtype, device=device)
     w_alpha = torch.randn(H, W, generator=g, dtype=torch.float64).to(dtype=dtype, device=device)
@@ -97,11 +104,12 @@ def model_and_camera(device: str, dtype: torch.dtype = torch.float32, n: int = 1
     return model, Camera(0, "v0", view, *K.tolist(), W, H)
 
 
-def fisher_blocks(device: str, dtype: torch.dtype = torch.float32, n: int = 120, seed: int = 0) -> torch.Tensor:
-    """The scene's per-Gaussian Fisher blocks computed on `device`. [N, 14, 14] float64, on the CPU"""
+def fisher_blocks(device: str, dtype: torch.dtype = torch.float32, n: int = 120, seed: int = 0,
+                  backend: str = "torch") -> torch.Tensor:
+    """The scene's per-Gaussian Fisher blocks computed on `device` with `backend`. [N, 14, 14] float64, on the CPU"""
     model, cam = model_and_camera(device, dtype, n, seed)
     background = torch.tensor([0.1, 0.2, 0.3], dtype=dtype, device=device)
-    return fisher_view_blocks(model, cam, background, SETTINGS).cpu()
+    return fisher_view_blocks(model, cam, background, settings(backend)).cpu()
 
 
 def compare_fisher(value: torch.Tensor, reference: torch.Tensor) -> list[str]:

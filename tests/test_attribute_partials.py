@@ -30,11 +30,13 @@ def dense_jacobian(scene, settings):
     return dense.permute(1, 2, 3, 0, 4).reshape(HEIGHT * WIDTH, n, d, 6 + d)
 
 
-SETTINGS = [RasterSettings(), RasterSettings(tile_size=8, chunk_size=2, backend="torch"),  # default: compiled
-            RasterSettings(tile_size=16, chunk_size=1, backend="torch")]
+SETTINGS = [RasterSettings(backend="compiled"), RasterSettings(tile_size=8, chunk_size=2, backend="torch"),
+            RasterSettings(tile_size=16, chunk_size=1, backend="torch"),
+            RasterSettings(tile_size=8, chunk_size=2, backend="compiled")]
 
 
-@pytest.fixture(scope="module", params=range(len(SETTINGS)), ids=["default", "tile8-chunk2", "tile16-chunk1"])
+@pytest.fixture(scope="module", params=range(len(SETTINGS)),
+                ids=["compiled-default", "torch-tile8-chunk2", "torch-tile16-chunk1", "compiled-tile8-chunk2"])
 def case(request):
     settings = SETTINGS[request.param]
     scene = small_scene()
@@ -74,25 +76,29 @@ def test_weighted_gram(case):
     torch.testing.assert_close(gram, expected, atol=1e-9, rtol=1e-9)  # float64 rounding
 
 
-def test_gram_symmetric_psd_and_float32_close():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_gram_symmetric_psd_and_float32_close(backend):
     scene = small_scene(seed=7)
-    gram = attribute_gram(*scene, WIDTH, HEIGHT, BG)
+    settings = RasterSettings(backend=backend)
+    gram = attribute_gram(*scene, WIDTH, HEIGHT, BG, settings)
     torch.testing.assert_close(gram, gram.transpose(1, 2), atol=0, rtol=0)
     eig = torch.linalg.eigvalsh(gram)
     assert (eig >= -1e-12 * eig.abs().max()).all()  # PSD up to float64 rounding
-    gram32 = attribute_gram(*(t.float() if t.is_floating_point() else t for t in scene), WIDTH, HEIGHT, BG.float())
+    gram32 = attribute_gram(*(t.float() if t.is_floating_point() else t for t in scene), WIDTH, HEIGHT, BG.float(),
+                            settings)
     assert gram32.dtype == torch.float64
     # float32 per-tile sums: relative error ~1e-6 of the largest entry per Gaussian.
     scale = gram.abs().amax((1, 2), keepdim=True).clamp_min(1e-30)  # the off-screen Gaussian has G = 0
     assert ((gram32 - gram).abs() / scale).max() < 1e-4
 
 
-def test_partials_chain_to_the_fast_backward():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_partials_chain_to_the_fast_backward(backend):
     # sum over pairs of g_pixel . jac equals the gradient rasterize's backward computes, on a 24x20 scene with
     # culled, off-screen, clamped and indefinite-conic Gaussians.
     width, height = 24, 20
     means2d, conics, opacities, colors, depths, radii = random_2d_scene(30, width, height, seed=9)
-    settings = RasterSettings(tile_size=16, chunk_size=4)  # 16 px tiles overhang the 24x20 image
+    settings = RasterSettings(tile_size=16, chunk_size=4, backend=backend)  # 16 px tiles overhang the 24x20 image
     leaves = [t.clone().requires_grad_(True) for t in (means2d, conics, opacities, colors)]
     image, _ = rasterize(*leaves, depths, radii, width, height, BG, settings)
     g = torch.randn(image.shape, dtype=torch.float64, generator=torch.Generator().manual_seed(2))
@@ -104,9 +110,10 @@ def test_partials_chain_to_the_fast_backward():
     torch.testing.assert_close(chained, grads, atol=1e-10, rtol=1e-9)  # float64 rounding
 
 
-def test_empty_scene():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_empty_scene(backend):
     scene = (torch.zeros(0, 2), torch.zeros(0, 3), torch.zeros(0), torch.zeros(0, 3), torch.zeros(0),
              torch.zeros(0, dtype=torch.long))
-    assert attribute_gram(*scene, 8, 8, BG.float()).shape == (0, 9, 9)
-    pp = pixel_attribute_partials(*scene, 8, 8, BG.float())
+    assert attribute_gram(*scene, 8, 8, BG.float(), RasterSettings(backend=backend)).shape == (0, 9, 9)
+    pp = pixel_attribute_partials(*scene, 8, 8, BG.float(), RasterSettings(backend=backend))
     assert pp.jac.shape == (0, 3, 9) and pp.pixel_ids.numel() == 0

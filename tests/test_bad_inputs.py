@@ -1,10 +1,17 @@
 """The bad-input catalogue: every case exits non-zero with one `error:` line on stderr that names the problem,
-no traceback, and no output directory that looks complete."""
+no traceback, and no output directory that looks complete.
+
+A few cases (one per CLI, one failing mid-run) run as subprocesses and check that contract end to end; the rest
+call the CLI's `main` in-process and check the `UserError` it raises (`utils.errors.run_cli` turns exactly that
+into the one `error:` line and exit status 2). Both check that nothing complete-looking was written.
+"""
 from __future__ import annotations
 
+import importlib
 import json
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -13,6 +20,7 @@ from PIL import Image
 from scene.gaussian_model import GaussianModel
 from tests.conftest import ROOT, run_cli
 from tests.scenes import random_gaussians
+from utils.errors import UserError
 
 TRAIN_FAST = ["--iterations", "5", "--num_random_points", "200", "--quiet"]
 ACTIVE = ["--method", "lite_gs", "--num_init_views", "2", "--views_per_step", "2", "--max_views", "6",
@@ -208,7 +216,18 @@ def setup_truncated_png(tiny_scene, tmp):
 CASES = {name[len("setup_"):]: fn for name, fn in globals().items() if name.startswith("setup_")}
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
+SUBPROCESS_CASES = {"missing_source", "non_finite_loss", "corrupt_ply", "metrics_no_renders", "truncated_selection",
+                    "script_missing_scene"}  # train.py, train.py mid-run, render.py, metrics.py, a script, bash
+
+
+def assert_nothing_complete(tmp_path: Path) -> None:
+    for status in tmp_path.rglob("run_status.json"):
+        assert json.loads(status.read_text())["status"] != "complete"
+    assert not list(tmp_path.rglob("results.json"))
+
+
+@pytest.mark.auto_backend  # the CLIs' default backend, as a user runs them
+@pytest.mark.parametrize("case", sorted(SUBPROCESS_CASES))
 def test_bad_input_fails_cleanly(case, tiny_scene, tmp_path):
     args, needle = CASES[case](tiny_scene, tmp_path)
     if args[0] == "bash":
@@ -216,10 +235,23 @@ def test_bad_input_fails_cleanly(case, tiny_scene, tmp_path):
     else:
         r = run_cli(*args)
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
-    assert r.returncode != 0, f"{case}: exit 0\n{r.stdout}"
+    assert r.returncode == 2, f"{case}: exit {r.returncode}\n{r.stdout}\n{r.stderr}"
     assert "Traceback" not in r.stderr, r.stderr
     assert len(lines) == 1 and lines[0].startswith("error: "), r.stderr
     assert needle in lines[0], lines[0]
-    for status in tmp_path.rglob("run_status.json"):
-        assert json.loads(status.read_text())["status"] != "complete"
-    assert not list(tmp_path.rglob("results.json"))
+    assert_nothing_complete(tmp_path)
+
+
+@pytest.mark.auto_backend  # the CLIs' default backend, as a user runs them
+@pytest.mark.parametrize("case", sorted(set(CASES) - SUBPROCESS_CASES))
+def test_bad_input_raises_one_line_user_error(case, tiny_scene, tmp_path, monkeypatch):
+    args, needle = CASES[case](tiny_scene, tmp_path)
+    assert args[0] in ("train.py", "render.py", "metrics.py"), args[0]
+    cli = importlib.import_module(args[0][:-len(".py")])
+    monkeypatch.setattr(sys, "argv", args)
+    monkeypatch.chdir(ROOT)
+    with pytest.raises(UserError) as err:
+        cli.main()
+    message = str(err.value)
+    assert "\n" not in message and needle in message, message
+    assert_nothing_complete(tmp_path)

@@ -9,11 +9,15 @@ from pathlib import Path
 import pytest
 import torch
 
-from gaussian_renderer import rasterization
+from gaussian_renderer import RasterSettings, rasterization
 from scene.builtin import CAMERA_ANGLE_X, CAMERA_RADIUS, STAMP, _object_points, make_builtin_scene
 from scene.dataset_readers import load_scene_info
 from tests.conftest import run_cli
 from utils.errors import UserError
+
+# The dataset generators (scene.builtin, scene.phone_capture) render with the default backend, as for a user;
+# the rasterizer's backends are tested in test_rasterize.py and test_compiled_rasterizer.py.
+pytestmark = pytest.mark.auto_backend
 
 RES, NUM_TRAIN, NUM_TEST = 32, 6, 3
 MINI = {"seed": 5, "resolution": 16, "num_train": 2, "num_test": 1}  # for tests that generate repeatedly
@@ -58,7 +62,7 @@ def test_images_match_a_render_from_the_loaded_cameras(small_scene):
     opacities = torch.full((means.shape[0],), 0.9)
     for cam in (info.train_cameras[0], info.test_cameras[-1]):
         out = rasterization(means, quats, scales[:, None].repeat(1, 3), opacities, colors, cam.viewmat,
-                            cam.intrinsics, cam.width, cam.height)
+                            cam.intrinsics, cam.width, cam.height, settings=RasterSettings(backend="torch"))
         # 8-bit straight colour and 8-bit alpha, composited again: at most about one level of 1/255.
         torch.testing.assert_close(cam.image, out.image, atol=1.5 / 255, rtol=0)
 

@@ -1,21 +1,33 @@
-"""Splitting a depth step's tiles into groups (bounded working set) changes nothing: image, gradients, Gram."""
-import sys
+"""The torch path's split of a depth step's tiles into groups (bounded working set) vs the dense reference.
+
+With the default `MAX_CHUNK_PAIRS` every test image fits in one group, so these tests shrink the bound to a few
+tiles per group: the image, the gradients and the Gram matrix must still equal the dense reference's.
+"""
+import importlib
 
 import pytest
 import torch
 
 from gaussian_renderer import RasterSettings, attribute_gram, rasterize
 from gaussian_renderer.reference import rasterize_reference
-from tests.test_rasterize import _grads, _run, random_2d_scene
+from tests.test_attribute_partials import HEIGHT, WIDTH, dense_jacobian, small_scene
+from tests.test_rasterize import BG, _grads, _run, random_2d_scene
 
-RASTERIZE = sys.modules["gaussian_renderer.rasterize"]  # the package re-exports the function under the same name
+CHUNK_ENGINE = "gaussian_renderer.tiles"  # the module whose MAX_CHUNK_PAIRS bounds the torch path's groups
+
+
+def limit_chunk_pairs(monkeypatch, pairs: int) -> None:
+    """Bound the torch path's pixel-Gaussian pairs per group to `pairs` for this test."""
+    module = importlib.import_module(CHUNK_ENGINE)
+    assert hasattr(module, "MAX_CHUNK_PAIRS"), f"{CHUNK_ENGINE} has no MAX_CHUNK_PAIRS; retarget CHUNK_ENGINE"
+    monkeypatch.setattr(module, "MAX_CHUNK_PAIRS", pairs)
 
 
 @pytest.mark.parametrize("tiles_per_group", [1, 3])
 def test_grouped_chunks_match_the_reference(monkeypatch, tiles_per_group):
-    settings = RasterSettings(tile_size=4, chunk_size=4)
+    settings = RasterSettings(tile_size=4, chunk_size=4, backend="torch")
     width, height = 24, 20  # 30 tiles: several groups per depth step, a last partial group
-    monkeypatch.setattr(RASTERIZE, "MAX_CHUNK_PAIRS", tiles_per_group * settings.chunk_size * settings.tile_size ** 2)
+    limit_chunk_pairs(monkeypatch, tiles_per_group * 4 * 4 ** 2)  # chunk x pixels per tile = 64 pairs per tile
     scene = random_2d_scene(30, width, height)
     img, alpha, leaves = _run(rasterize, scene, width, height, settings)
     img_ref, alpha_ref, ref_leaves = _run(rasterize_reference, scene, width, height, settings)
@@ -26,10 +38,12 @@ def test_grouped_chunks_match_the_reference(monkeypatch, tiles_per_group):
         torch.testing.assert_close(fast, ref, atol=1e-9, rtol=1e-9)
 
 
-def test_grouping_leaves_the_gram_unchanged(monkeypatch):
-    settings = RasterSettings(tile_size=4, chunk_size=4)
-    means2d, conics, opacities, colors, depths, radii = random_2d_scene(30, 24, 20)
-    args = (means2d, conics, opacities, colors, depths, radii, 24, 20, torch.zeros(3, dtype=torch.float64), settings)
-    whole = attribute_gram(*args)
-    monkeypatch.setattr(RASTERIZE, "MAX_CHUNK_PAIRS", 2 * settings.chunk_size * settings.tile_size ** 2)
-    torch.testing.assert_close(attribute_gram(*args), whole, atol=1e-12, rtol=1e-10)  # float64 summation order
+@pytest.mark.parametrize("tiles_per_group", [1, 3])
+def test_grouped_gram_equals_the_reference_jacobian_products(monkeypatch, tiles_per_group):
+    settings = RasterSettings(tile_size=4, chunk_size=2, backend="torch")  # 16 tiles, several depth steps
+    scene = small_scene()
+    limit_chunk_pairs(monkeypatch, tiles_per_group * 2 * 4 ** 2)
+    gram = attribute_gram(*scene, WIDTH, HEIGHT, BG, settings)
+    dense = dense_jacobian(scene, settings)  # [H*W, N, D, A] by autograd through the dense reference
+    expected = torch.einsum("pnda,pndb->nab", dense, dense)
+    torch.testing.assert_close(gram, expected, atol=1e-9, rtol=1e-9)  # float64 rounding over 256 pixels

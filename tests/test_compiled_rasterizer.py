@@ -170,6 +170,15 @@ def test_numba_threads_follow_torch():
         torch.set_num_threads(before)
 
 
+def test_the_guard_fails_a_test_that_reaches_auto():
+    # tests/conftest.py: without the auto_backend marker, a CPU call resolving backend="auto" fails the test.
+    with pytest.raises(AssertionError, match='backend="auto"'):
+        rasterize(*random_2d_scene(5, 8, 8), 8, 8, BG, RasterSettings(backend="auto"))
+    with pytest.raises(AssertionError, match='backend="auto"'):
+        attribute_gram(*random_2d_scene(5, 8, 8), 8, 8, BG, RasterSettings(backend="auto"))
+
+
+@pytest.mark.auto_backend
 def test_auto_takes_compiled_on_cpu(monkeypatch):
     calls = []
     from gaussian_renderer.compiled import ops
@@ -181,6 +190,7 @@ def test_auto_takes_compiled_on_cpu(monkeypatch):
     assert calls == [1]
 
 
+@pytest.mark.auto_backend
 def test_missing_numba(monkeypatch, caplog):
     # Simulated import failure: auto falls back with one log line, an explicit request is a UserError.
     monkeypatch.setattr(compiled, "numba_import_error", lambda: "No module named 'numba'")

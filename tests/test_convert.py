@@ -164,6 +164,7 @@ def test_matcher_choice():
 # ----------------------------------------------------------------------------------------------- real COLMAP
 
 
+@pytest.mark.slow  # ~1 min on an idle 2-core machine (COLMAP on 8 images, a short train.py run)
 @pytest.mark.skipif(shutil.which("colmap") is None,
                     reason="COLMAP not on PATH (bash scripts/install_colmap.sh installs it)")
 def test_colmap_recovers_synthetic_capture(tmp_path):

@@ -8,7 +8,7 @@ import torch
 
 from active import build_selector
 from active.base import SelectionContext
-from active.selectors.coverage import farthest_point_picks
+from active.farthest_point import farthest_point_picks
 from gaussian_renderer.projection import camera_center, camera_centers, look_at_point
 from scene.scene import Scene
 from tests.conftest import run_cli

@@ -19,14 +19,17 @@ pytestmark = [pytest.mark.cuda,
               pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device (torch sees none)")]
 
 
+@pytest.mark.parametrize("cpu_backend", dc.BACKENDS)
 @pytest.mark.parametrize("seed", [0, 1])
-def test_render_and_gradients_match_cpu(seed):
-    problems = dc.compare_renders(dc.render_with_grads("cuda", seed=seed), dc.render_with_grads("cpu", seed=seed))
+def test_render_and_gradients_match_cpu(seed, cpu_backend):
+    problems = dc.compare_renders(dc.render_with_grads("cuda", seed=seed),
+                                  dc.render_with_grads("cpu", seed=seed, backend=cpu_backend))
     assert not problems, problems
 
 
-def test_fisher_blocks_match_cpu():
-    problems = dc.compare_fisher(dc.fisher_blocks("cuda"), dc.fisher_blocks("cpu"))
+@pytest.mark.parametrize("cpu_backend", dc.BACKENDS)
+def test_fisher_blocks_match_cpu(cpu_backend):
+    problems = dc.compare_fisher(dc.fisher_blocks("cuda"), dc.fisher_blocks("cpu", backend=cpu_backend))
     assert not problems, problems
 
 

@@ -7,34 +7,33 @@ from active import build_selector
 from active.base import SelectionContext
 from active.fisher import (DiagonalGainOracle, build_oracle, fisher_view_blocks, fisher_view_diagonals,
                            parameter_columns)
-from gaussian_renderer import rasterization
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
-from tests.test_fisher_oracle import BG, SETTINGS, W, H, cameras, tiny_model
+from tests.test_fisher_oracle import BG, cameras, reference_image, settings, tiny_model
 from utils.errors import UserError
 
 
 def bruteforce_diagonals(model, cam, sigma=1.0):
     """sigma^-2 sum over pixels and channels of (dI/dtheta)^2 for every raw parameter, from the full autograd
-    Jacobian of the rendered image, in RAW_PARAMETER_GROUPS order. [N, 3 + 4 + 3 + 1 + 3 + 9]"""
-    def image(means, quats, log_scales, logit_opacities, sh_dc, sh_rest):
-        return rasterization(means, quats, torch.exp(log_scales), torch.sigmoid(logit_opacities),
-                             torch.cat([sh_dc, sh_rest], dim=1), cam.viewmat, cam.intrinsics, W, H, sh_degree=1,
-                             background=BG, settings=SETTINGS).image
+    Jacobian of the image rendered by the dense reference, in RAW_PARAMETER_GROUPS order. [N, 3 + 4 + 3 + 1 + 3 + 9]"""
+    def image(*raw):
+        return reference_image(cam, *raw)
 
-    jac = torch.autograd.functional.jacobian(image, tuple(model.params[k].detach() for k in RAW_PARAMETER_GROUPS))
+    jac = torch.autograd.functional.jacobian(image, tuple(model.params[k].detach() for k in RAW_PARAMETER_GROUPS),
+                                             vectorize=True)
     n = model.num_gaussians
     widths = [model.params[k][0].numel() for k in RAW_PARAMETER_GROUPS]
     j = torch.cat([part.reshape(-1, n, w) for part, w in zip(jac, widths)], dim=2)  # [pixels x channels, N, P]
     return (j ** 2).sum(0) / sigma**2
 
 
-def test_diagonals_equal_bruteforce_and_the_block_diagonals():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_diagonals_equal_bruteforce_and_the_block_diagonals(backend):
     model, cam = tiny_model(seed=1), cameras()[2]
     expected = bruteforce_diagonals(model, cam, sigma=0.5)
-    diag = fisher_view_diagonals(model, cam, BG, SETTINGS, sigma=0.5)
+    diag = fisher_view_diagonals(model, cam, BG, settings(backend), sigma=0.5)
     assert diag.shape == (6, 3 + 4 + 3 + 1 + 3 + 9) and expected[:, 14:].abs().max() > 1e-4  # sh_rest matters
     torch.testing.assert_close(diag, expected, rtol=1e-4, atol=1e-4 * expected.abs().max().item())
-    blocks = fisher_view_blocks(model, cam, BG, SETTINGS, sigma=0.5, param_groups=RAW_PARAMETER_GROUPS)
+    blocks = fisher_view_blocks(model, cam, BG, settings(backend), sigma=0.5, param_groups=RAW_PARAMETER_GROUPS)
     torch.testing.assert_close(diag, torch.diagonal(blocks, dim1=-2, dim2=-1), rtol=1e-10, atol=1e-12)
     cols = parameter_columns(model, RAW_PARAMETER_GROUPS)
     assert cols["quats"] == slice(3, 7) and cols["sh_rest"] == slice(14, 23)
@@ -57,13 +56,14 @@ def greedy_reference(diags, train, candidates, k, keep, lam):
 @pytest.mark.parametrize("mode", ["cached", "streaming"])
 @pytest.mark.parametrize("params,lam", [("means,log_scales,logit_opacities,sh_dc,sh_rest", 1e-6),
                                         ("quats,sh_dc", 1e-2)])
-def test_selection_equals_greedy_on_bruteforce_diagonals(mode, params, lam):
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_selection_equals_greedy_on_bruteforce_diagonals(mode, params, lam, backend):
     model, cams = tiny_model(seed=2), cameras()
     diags = [bruteforce_diagonals(model, cam) for cam in cams]
     cols = parameter_columns(model, RAW_PARAMETER_GROUPS)
     keep = torch.cat([torch.arange(cols[g].start, cols[g].stop) for g in params.split(",")])
     ids, scores = greedy_reference(diags, [0, 3], [1, 2, 4, 5], 3, keep, lam)
-    oracle = build_oracle("diagonal", model, cams, [0, 3], BG, SETTINGS, mode=mode)
+    oracle = build_oracle("diagonal", model, cams, [0, 3], BG, settings(backend), mode=mode)
     ctx = SelectionContext([5, 1, 4, 2], oracle, torch.Generator().manual_seed(0), 0)
     sel = build_selector("fisherrf", fisherrf_lambda=lam, fisherrf_params=params).select(ctx, 3)
     assert sel.ids == ids

@@ -1,7 +1,6 @@
 """scripts/grid.py: job expansion against the paper's protocols, the generated sbatch text, bad input, skip / resume /
 failure handling and SIGKILL-and-rerun with a fake interpreter (fast), and a tiny grid end to end through the real
 CLIs with the local launcher."""
-import importlib.util
 import json
 import os
 import signal
@@ -17,14 +16,12 @@ from active import build_selector
 from active.oracle_counts import mean_rounded_up, schedule_counts
 from active.registry import selector_options
 from active.schedule import farthest_point_views, plan_stages
+from experiments import grid_args
 from experiments.protocols import PROTOCOLS, RunScale, expand
 from tests.conftest import ROOT
 from tests.fake_cli import calls, make_fake, option
 from utils.errors import UserError
 
-spec = importlib.util.spec_from_file_location("grid_cli", ROOT / "scripts" / "grid.py")
-grid_cli = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(grid_cli)
 
 
 def takes_eps(method: str) -> bool:
@@ -144,7 +141,7 @@ def test_bad_input_is_a_user_error(tmp_path, monkeypatch, args, expect):
     _, python, data, _ = make_fake(tmp_path)
     monkeypatch.setenv("PATH", "/usr/bin:/bin")  # no sbatch here
     with pytest.raises(UserError) as exc:
-        grid_cli.parse(["--data", str(data), "--out", str(tmp_path / "out"), "--python", str(python), *args])
+        grid_args.parse(["--data", str(data), "--out", str(tmp_path / "out"), "--python", str(python), *args])
     assert expect in str(exc.value) and "\n" not in str(exc.value), str(exc.value)
     if "chair" in args:
         assert "lego" in str(exc.value) and "ship" in str(exc.value)  # the scenes that exist
@@ -252,7 +249,7 @@ def test_running_jobs_report_their_progress(tmp_path):
 
 def test_runs_made_with_other_flags_are_refused(tmp_path):
     """A run directory from before the grid (no grid.json) whose cfg_args differ from what the grid would pass."""
-    import train
+    from training.config import parse_config
     env, python, data, log = make_fake(tmp_path)
     out = tmp_path / "out"
     args = ["--setup", "setup1", "--data", str(data), "--scenes", "lego", "--methods", "random", "--out", str(out),
@@ -262,7 +259,7 @@ def test_runs_made_with_other_flags_are_refused(tmp_path):
     argv = r.stdout.split("train.py ", 1)[1].split("\n")[0].split()
     model = Path(argv[argv.index("-m") + 1])
     model.mkdir(parents=True)
-    cfg = train.parse_config(argv[:-2] + ["--iterations", "1100", "--device", "cpu"]).to_dict()
+    cfg = parse_config(argv[:-2] + ["--iterations", "1100", "--device", "cpu"]).to_dict()
     (model / "cfg_args").write_text(json.dumps(cfg))
     r = grid(*args, env=env)
     assert r.returncode == 2 and str(model) in r.stderr and "--iterations 1100" in r.stderr, r.stderr
@@ -348,6 +345,9 @@ def test_inline_launcher(tmp_path):
             for c in calls(log, "train.py")} == {("1", "15", "4")}
 
 
+# Slow: the runner's layout, skip/resume and summary are covered with the fake CLIs above, and train.py ->
+# render.py -> metrics.py by tests/test_train_e2e.py::test_train_render_metrics.
+@pytest.mark.slow
 def test_tiny_grid_end_to_end_local(tiny_scene, tmp_path):
     """2 methods x 2 seeds through the real train.py, render.py and metrics.py, two jobs at a time."""
     out = tmp_path / "out"

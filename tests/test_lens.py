@@ -8,12 +8,16 @@ import numpy as np
 import pytest
 import torch
 
-from gaussian_renderer import rasterization
+from gaussian_renderer import RasterSettings, rasterization
 from scene.builtin import hemisphere_positions, scene_gaussians
 from scene.cameras import look_at
 from scene.lens import Lens, Undistorter, round_trip_error
 from scene.phone_capture import capture_lens, render_distorted
 from utils.errors import UserError
+
+# The dataset generators (scene.builtin, scene.phone_capture) render with the default backend, as for a user;
+# the rasterizer's backends are tested in test_rasterize.py and test_compiled_rasterizer.py.
+pytestmark = pytest.mark.auto_backend
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -25,7 +29,8 @@ def render_pinhole(gaussians, viewmat: torch.Tensor, lens: Lens) -> np.ndarray:
     """The pinhole render straight from the rasterizer (the ground truth undistortion must reach). [H, W, 3]"""
     means, quats, scales, opacities, colors = gaussians
     out = rasterization(means, quats, scales, opacities, colors, viewmat.float(),
-                        torch.tensor([lens.fx, lens.fy, lens.cx, lens.cy]), lens.width, lens.height)
+                        torch.tensor([lens.fx, lens.fy, lens.cx, lens.cy]), lens.width, lens.height,
+                        settings=RasterSettings(backend="compiled"))  # the pinhole truth; backends: test_rasterize
     return (out.image.clamp(0, 1).permute(1, 2, 0).numpy() * 255 + 0.5).astype(np.uint8)
 
 

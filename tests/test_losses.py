@@ -6,7 +6,7 @@ import math
 import pytest
 import torch
 
-from utils.losses import l1_loss, psnr, ssim
+from utils.losses import l1_loss, photometric_loss, psnr, ssim
 
 
 def ssim_reference(img1: torch.Tensor, img2: torch.Tensor) -> float:
@@ -103,3 +103,12 @@ def test_l1_closed_form():
     a = torch.zeros(2, 3, 3)
     b = torch.arange(18, dtype=torch.float32).reshape(2, 3, 3)
     assert l1_loss(a, b).item() == 8.5  # mean of 0..17, exact in float32
+
+
+def test_photometric_loss_is_the_3dgs_mix():
+    """0.8 L1 + 0.2 (1 - SSIM) by default (the 3DGS weights, written out here), lambda as given otherwise."""
+    g = torch.Generator().manual_seed(3)
+    a, b = torch.rand(3, 16, 12, generator=g), torch.rand(3, 16, 12, generator=g)
+    l1, s = (a - b).abs().mean(), ssim(a, b)
+    assert torch.allclose(photometric_loss(a, b), 0.8 * l1 + 0.2 * (1 - s))
+    assert torch.allclose(photometric_loss(a, b, 0.5), 0.5 * l1 + 0.5 * (1 - s))

@@ -10,7 +10,7 @@ from active import build_selector, list_selectors
 from active.base import SelectionContext
 from active.fisher import DiagonalGainOracle
 from active.logdet import BlockGainOracle, BlockInformation
-from active.oracle_counts import mean_rounded_up, schedule_counts
+from active.oracle_counts import exhaustive_count, mean_rounded_up, schedule_counts
 from tests.test_logdet import random_blocks, single_thread  # noqa: F401  (autouse fixture)
 from utils.errors import UserError
 
@@ -84,6 +84,12 @@ def test_literal_sums_and_schedule():
     assert build_selector("pop_gs").conservative_count(4, 10) == 4 + 3 + 2 + 1  # K >= M: all M chosen
     with pytest.raises(UserError, match="eps"):
         build_selector("lite_gs", eps=1.0)
+
+
+def test_the_shared_count_helpers_on_literals():
+    assert exhaustive_count(98, 3) == 98 + 97 + 96
+    assert exhaustive_count(3, 5) == 3 + 2 + 1 and exhaustive_count(0, 3) == 0 and exhaustive_count(7, 0) == 0
+    assert mean_rounded_up([291, 282, 273]) == 282 and mean_rounded_up([1, 2]) == 2 and mean_rounded_up([]) == 0
 
 
 def test_lite_gs_count_does_not_grow_with_k():

@@ -7,6 +7,7 @@ from gaussian_renderer.reference import rasterize_reference
 from utils.errors import UserError
 
 BG = torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64)
+BACKENDS = ["torch", "compiled"]  # every rasterizer test names its backend ("auto" would test only one)
 
 
 def random_2d_scene(n, width, height, seed=0, dtype=torch.float64):
@@ -52,7 +53,7 @@ def _grads(image, alpha, leaves, seed=1):
     (1, 16, 16, 4, 8),
     (60, 40, 17, 16, 16),  # height not a multiple of the tile size
 ])
-@pytest.mark.parametrize("backend", ["torch", "compiled"])
+@pytest.mark.parametrize("backend", BACKENDS)
 def test_fast_matches_reference_forward_and_backward(n, width, height, tile, chunk, backend):
     settings = RasterSettings(tile_size=tile, chunk_size=chunk, backend=backend)
     scene = random_2d_scene(n, width, height)
@@ -78,10 +79,11 @@ def test_scene_exercises_every_rule():
     assert (alpha > 0.99).any() and (power > 0).any() and ((alpha < 1 / 255) & (alpha > 0)).any()
 
 
-def test_culled_gaussian_is_ignored():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_culled_gaussian_is_ignored(backend):
     width, height = 24, 20
     scene = list(random_2d_scene(30, width, height))
-    settings = RasterSettings()
+    settings = RasterSettings(backend=backend)
     img, alpha, _ = _run(rasterize, scene, width, height, settings)
     scene[3] = scene[3].clone()
     scene[3][0] = torch.tensor([5.0, -5.0, 5.0], dtype=torch.float64)  # recolour the culled Gaussian
@@ -89,54 +91,58 @@ def test_culled_gaussian_is_ignored():
     assert torch.equal(img, img2) and torch.equal(alpha, alpha2)
 
 
-@pytest.mark.parametrize("fn", [rasterize, rasterize_reference])
-def test_no_visible_gaussians_give_background(fn):
+@pytest.mark.parametrize("fn, backend", [(rasterize, "torch"), (rasterize, "compiled"), (rasterize_reference, "torch")])
+def test_no_visible_gaussians_give_background(fn, backend):
     empty = (torch.zeros(0, 2), torch.zeros(0, 3), torch.zeros(0), torch.zeros(0, 3), torch.zeros(0),
              torch.zeros(0, dtype=torch.long))
     culled = random_2d_scene(6, 9, 5, dtype=torch.float32)[:5] + (torch.zeros(6, dtype=torch.long),)
     for scene in (empty, culled):
-        img, alpha = fn(*scene, 9, 5, BG.float())
+        img, alpha = fn(*scene, 9, 5, BG.float(), RasterSettings(backend=backend))
         assert img.shape == (3, 5, 9)
         torch.testing.assert_close(img, BG.float()[:, None, None].expand(3, 5, 9), atol=0, rtol=0)
         assert alpha.abs().max() == 0
 
 
-def test_background_gradient_is_transmittance_weighted():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_background_gradient_is_transmittance_weighted(backend):
     width, height = 24, 20
-    img, alpha, leaves = _run(rasterize, random_2d_scene(30, width, height), width, height, RasterSettings())
+    img, alpha, leaves = _run(rasterize, random_2d_scene(30, width, height), width, height,
+                              RasterSettings(backend=backend))
     grad_bg = torch.autograd.grad(img.sum(), leaves[4])[0]
     # d image / d bg_c = T_final per pixel, summed: (1 - alpha) summed over pixels, every channel. Rounding only.
     torch.testing.assert_close(grad_bg, (1 - alpha).sum().expand(3), atol=1e-10, rtol=0)
 
 
-def test_chunk_size_does_not_change_results():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_chunk_size_does_not_change_results(backend):
     width, height = 24, 20
     scene = random_2d_scene(30, width, height, seed=3)
     results = []
     for chunk in (1, 3, 1000):  # 1 and 3 force many chunks per tile list; 1000 is a single chunk
         img, alpha, leaves = _run(rasterize, scene, width, height,
-                                  RasterSettings(tile_size=16, chunk_size=chunk, backend="torch"))
+                                  RasterSettings(tile_size=16, chunk_size=chunk, backend=backend))
         results.append((img, alpha, *_grads(img, alpha, leaves)))
     for other in results[1:]:
         for a, b in zip(results[0], other):
             torch.testing.assert_close(a, b, atol=1e-12, rtol=1e-12)  # same sums, split differently
 
 
-def test_tile_cutoff_only_drops_pairs_the_alpha_test_skips():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_tile_cutoff_only_drops_pairs_the_alpha_test_skips(backend):
     # With radii too large to bind, the opacity-aware tile reach must not change the image: it only removes
     # pairs whose alpha is below alpha_min anyway. Compare with the dense twin that has no tile rule at all.
     width, height = 24, 20
     means2d, conics, opacities, colors, depths, radii = random_2d_scene(30, width, height, seed=4)
     conics[3] = conics[4]  # positive-definite conics only: the reach bound assumes them
     scene = (means2d, conics, opacities, colors, depths, torch.where(radii > 0, 100, 0))
-    settings = RasterSettings(tile_size=4)
+    settings = RasterSettings(tile_size=4, backend=backend)
     img, alpha, _ = _run(rasterize, scene, width, height, settings)
     img_all, alpha_all, _ = _run(rasterize_reference, scene, width, height, settings, tile_cutoff=False)
     torch.testing.assert_close(img, img_all, atol=1e-10, rtol=0)  # float64 rounding
     torch.testing.assert_close(alpha, alpha_all, atol=1e-10, rtol=0)
 
 
-@pytest.mark.parametrize("backend", ["torch", "compiled"])
+@pytest.mark.parametrize("backend", BACKENDS)
 def test_early_termination_matches_reference(backend):
     # Opaque Gaussians stacked on one spot: transmittance reaches the 1e-4 floor and later ones are skipped.
     n = 12

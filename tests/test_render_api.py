@@ -15,7 +15,12 @@ F64 = torch.float64
 W, H = 20, 13
 VIEW = look_at_viewmat((0.5, -2.6, 0.9))
 K = intrinsics_for(W, H, 50.0, cx=8.7, cy=7.2)
-SETTINGS = RasterSettings(tile_size=8, chunk_size=3)
+SETTINGS = RasterSettings(tile_size=8, chunk_size=3, backend="torch")  # the dense reference ignores the backend
+BACKENDS = ["torch", "compiled"]  # every test that rasterizes runs on both (backend "auto" would pick one)
+
+
+def settings(backend):
+    return RasterSettings(tile_size=8, chunk_size=3, backend=backend)
 BG = torch.tensor([0.1, 0.3, 0.6], dtype=F64)
 
 
@@ -32,11 +37,12 @@ def _reference_render(means, quats, scales, opacities, sh_coeffs, degree):
     return image, alpha, proj
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("degree", [0, 2])
-def test_rasterization_matches_reference_forward_and_backward(degree):
+def test_rasterization_matches_reference_forward_and_backward(degree, backend):
     p = random_gaussians(12, seed=4, sh_degree=degree, scale=0.2)
     leaves = [t.clone().requires_grad_(True) for t in _activated(p)] + [p["sh_coeffs"].clone().requires_grad_(True)]
-    out = rasterization(*leaves, VIEW, K, W, H, sh_degree=degree, background=BG, settings=SETTINGS)
+    out = rasterization(*leaves, VIEW, K, W, H, sh_degree=degree, background=BG, settings=settings(backend))
     ref_image, ref_alpha, ref_proj = _reference_render(*leaves, degree)
     assert out.image.shape == (3, H, W) and out.alpha.shape == (H, W)
     assert out.visible.sum() >= 8 and out.alpha.max() > 0.5  # most Gaussians land in view
@@ -61,29 +67,33 @@ def test_rasterization_matches_reference_forward_and_backward(degree):
     torch.testing.assert_close(out.means2d.grad, ref_proj.means2d.grad, rtol=1e-9, atol=1e-11)
 
 
-def test_sh_degree_zero_equals_precomputed_colours():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_sh_degree_zero_equals_precomputed_colours(backend):
     p = random_gaussians(6, seed=1, scale=0.2)
     args = _activated(p)
-    via_sh = rasterization(*args, p["sh_coeffs"], VIEW, K, W, H, sh_degree=0, background=BG)
+    via_sh = rasterization(*args, p["sh_coeffs"], VIEW, K, W, H, sh_degree=0, background=BG,
+                           settings=settings(backend))
     colors = torch.clamp_min(C0 * p["sh_coeffs"][:, 0] + 0.5, 0.0)
-    direct = rasterization(*args, colors, VIEW, K, W, H, background=BG)
+    direct = rasterization(*args, colors, VIEW, K, W, H, background=BG, settings=settings(backend))
     torch.testing.assert_close(via_sh.image, direct.image, rtol=0, atol=1e-15)  # same arithmetic, one rounding
 
 
-def test_zero_gaussians_render_the_background():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_zero_gaussians_render_the_background(backend):
     z3, z4 = torch.zeros(0, 3, dtype=F64), torch.zeros(0, 4, dtype=F64)
     for colors, degree in [(torch.zeros(0, 3, dtype=F64), None), (torch.zeros(0, 4, 3, dtype=F64), 1)]:
         out = rasterization(z3, z4, z3, torch.zeros(0, dtype=F64), colors, VIEW, K, W, H, sh_degree=degree,
-                            background=BG)
+                            background=BG, settings=settings(backend))
         torch.testing.assert_close(out.image, BG[:, None, None].expand(3, H, W), rtol=0, atol=0)
         torch.testing.assert_close(out.alpha, torch.zeros(H, W, dtype=F64), rtol=0, atol=0)
         assert out.means2d.shape == (0, 2) and out.radii.shape == (0,) and out.visible.shape == (0,)
 
 
-def test_default_background_is_black_and_any_channel_count_works():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_default_background_is_black_and_any_channel_count_works(backend):
     p = random_gaussians(1, seed=2, scale=0.3)
     colors = torch.rand(1, 5, dtype=F64)
-    out = rasterization(*_activated(p), colors, VIEW, K, W, H)
+    out = rasterization(*_activated(p), colors, VIEW, K, W, H, settings=settings(backend))
     assert out.image.shape == (5, H, W)
     far = out.alpha < 1e-12
     assert far.any() and (out.image[:, far] == 0).all()
@@ -114,9 +124,10 @@ def _model_and_camera(sh_degree=1):
     return model, camera
 
 
-def test_render_of_a_model_equals_the_dense_reference_forward_and_backward():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_render_of_a_model_equals_the_dense_reference_forward_and_backward(backend):
     model, camera = _model_and_camera()
-    out = render(camera, model, BG, SETTINGS)
+    out = render(camera, model, BG, settings(backend))
     raw = {k: v.detach().clone().requires_grad_(True) for k, v in model.params.items()}
     # The model's activations written out here (exp, normalised wxyz quaternion, sigmoid, SH = dc + rest), then the
     # projection and the dense every-pixel reference compositing, all plain autograd.
@@ -136,10 +147,11 @@ def test_render_of_a_model_equals_the_dense_reference_forward_and_backward():
     assert out.means2d.grad is not None and out.means2d.grad.shape == (8, 2)
 
 
-def test_render_override_colour_equals_the_dense_reference():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_render_override_colour_equals_the_dense_reference(backend):
     model, camera = _model_and_camera()
     override = torch.rand(8, 3, dtype=F64, generator=torch.Generator().manual_seed(3))
-    out = render(camera, model, BG, SETTINGS, override_color=override)
+    out = render(camera, model, BG, settings(backend), override_color=override)
     proj = project_gaussians(model.means.detach(), model.unit_quats.detach(), model.scales.detach(), VIEW, K, W, H)
     ref, _ = rasterize_reference(proj.means2d, proj.conics, model.opacities.detach(), override, proj.depths,
                                  proj.radii, W, H, BG, SETTINGS)

@@ -1,9 +1,11 @@
 """Resolution policy: the CPU width cap, the 3DGS 1.6k rule on CUDA, bad values, and what train.py records."""
 import json
+from types import SimpleNamespace
 
 import pytest
+from PIL import Image
 
-from scene.resolution_policy import choose_resolution, probe_image_size
+from scene.resolution_policy import choose_resolution, probe_image_size, training_resolution
 from tests.conftest import run_cli
 from utils.errors import UserError
 
@@ -51,6 +53,35 @@ def test_bad_values_name_the_problem(requested, full, max_width, names):
 def test_probe_image_size(tiny_scene, tmp_path):
     assert probe_image_size(str(tiny_scene)) == (32, 32)
     assert probe_image_size(str(tmp_path / "missing")) is None
+
+
+def _transforms_json_dataset(root, frame_extra=None, top_extra=None, image_size=(400, 300)):
+    """A nerfstudio-style dataset: transforms.json at the root, its frames under frames/ (no images/ folder)."""
+    (root / "frames").mkdir(parents=True)
+    if image_size is not None:
+        Image.new("RGB", image_size).save(root / "frames" / "frame_00001.jpg")
+    frame = {"file_path": "frames/frame_00001.jpg", "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4],
+                                                                          [0, 0, 0, 1]], **(frame_extra or {})}
+    (root / "transforms.json").write_text(json.dumps({"fl_x": 300.0, **(top_extra or {}), "frames": [frame]}))
+    return root
+
+
+def test_probe_reads_a_transforms_json_frame_outside_images(tmp_path):
+    # The image file wins; without it, the frame's w/h, else the file's top-level w/h.
+    assert probe_image_size(str(_transforms_json_dataset(tmp_path / "a"))) == (400, 300)
+    assert probe_image_size(str(_transforms_json_dataset(tmp_path / "b", {"w": 640, "h": 480}, None, None))) \
+        == (640, 480)
+    assert probe_image_size(str(_transforms_json_dataset(tmp_path / "c", None, {"w": 960, "h": 540}, None))) \
+        == (960, 540)
+    assert probe_image_size(str(_transforms_json_dataset(tmp_path / "d", None, None, None))) is None
+
+
+def test_transforms_json_dataset_gets_the_cpu_cap(tmp_path):
+    # 400 px wide on the CPU with the default 200 px cap: -r 2, with the one-line notice.
+    cfg = SimpleNamespace(source_path=str(_transforms_json_dataset(tmp_path / "ns")), images="images", resolution=-1,
+                          device="cpu", cpu_max_width=200)
+    choice = training_resolution(cfg)
+    assert choice is not None and (choice.resolution, choice.size) == (2, (200, 150)) and "-r 2" in choice.notice
 
 
 def test_train_records_the_effective_resolution(tiny_scene, tmp_path):

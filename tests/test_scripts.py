@@ -2,8 +2,11 @@
 option errors, the directory layout, iteration scaling and EXTRA_TRAIN_ARGS, with a fake interpreter for the CLIs.
 The grid runner itself is tested in test_grid.py."""
 import os
+import shutil
 import subprocess
 import sys
+
+import pytest
 
 from active import build_selector
 from active.oracle_counts import mean_rounded_up, schedule_counts
@@ -65,3 +68,23 @@ def test_ablation_wrapper_dry_run(tmp_path):
     assert "20 job(s), 20 to run" in r.stdout  # lite_gs and ssg at 5 eps values, 2 seeds, on ship
     assert sum(line.startswith("ship/ssg_eps0.25/seed") for line in r.stdout.splitlines()) == 2
     assert not log.exists()
+
+
+@pytest.mark.parametrize("wrapper", ["setup1.sh", "ablation_ssg.sh"])
+def test_wrapper_without_venv_or_python_sets_up_the_environment(tmp_path, wrapper):
+    # A fresh clone: no .venv, no PYTHON. The wrapper must take its interpreter from scripts/setup_env.sh (stubbed
+    # here in a copy of scripts/: it prints a fake python that records its arguments), never a bare `python`.
+    scripts = tmp_path / "clone" / "scripts"
+    scripts.mkdir(parents=True)
+    for name in ("common.sh", wrapper):
+        shutil.copy(ROOT / "scripts" / name, scripts / name)
+    log, python = tmp_path / "calls.txt", tmp_path / "venv-python"
+    python.write_text(f'#!/usr/bin/env bash\necho "$@" >> {log}\n')
+    python.chmod(0o755)
+    (scripts / "setup_env.sh").write_text(f'echo "setup_env: stub" >&2\necho {python}\n')
+    env = {k: v for k, v in os.environ.items() if k != "PYTHON"}
+    r = subprocess.run(["bash", str(scripts / wrapper), "--scenes", "lego"], capture_output=True, text=True, env=env,
+                       timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert "setup_env: stub" in r.stderr
+    assert log.read_text().startswith(f"{scripts / 'grid.py'} --setup ")

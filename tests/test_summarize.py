@@ -1,22 +1,17 @@
-"""scripts/summarize.py on synthetic model directories with known values: every method and column present,
+"""experiments/summary.py (and its CLI scripts/summarize.py) on synthetic model directories with known values: every method and column present,
 means/stds against numpy, oracle counts averaged over steps and rounded up, incomplete runs listed, PNGs written."""
 import csv
-import importlib.util
 import json
 import math
-import sys
 from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
-from tests.conftest import ROOT, run_cli
+from experiments import summary as summarize
+from tests.conftest import run_cli
 
-spec = importlib.util.spec_from_file_location("summarize", ROOT / "scripts" / "summarize.py")
-summarize = importlib.util.module_from_spec(spec)
-sys.modules["summarize"] = summarize  # dataclasses look their module up there
-spec.loader.exec_module(summarize)
 
 POOL = 12  # synthetic training-camera pool (ids 0..11)
 

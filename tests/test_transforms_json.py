@@ -19,6 +19,10 @@ from scene.phone_capture import capture_lens, make_phone_capture
 from tests.test_dataset_readers import C2W_A, C2W_B, pixel, rgba_image
 from utils.errors import UserError
 
+# The dataset generators (scene.builtin, scene.phone_capture) render with the default backend, as for a user;
+# the rasterizer's backends are tested in test_rasterize.py and test_compiled_rasterizer.py.
+pytestmark = pytest.mark.auto_backend
+
 W, H = 40, 20
 
 

@@ -11,7 +11,7 @@ from active.logdet import BlockInformation
 from active.uncertainty import gaussian_uncertainty, recorded_train_views, uncertainty_map
 from gaussian_renderer import render
 from tests.conftest import run_cli
-from tests.test_fisher_oracle import BG, SETTINGS, bruteforce_blocks, cameras, tiny_model
+from tests.test_fisher_oracle import BG, bruteforce_blocks, cameras, settings, tiny_model
 from utils.errors import UserError
 from utils.uncertainty_metrics import ause, average_ranks, spearman
 
@@ -38,26 +38,29 @@ def test_ause_on_known_arrays():
     assert ause(-errors, errors, bins=4) > ause(np.array([2.0, 1.0, 4.0, 3.0]), errors, bins=4) > 0
 
 
-def test_gaussian_uncertainty_equals_a_dense_inverse_of_bruteforce_blocks():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_gaussian_uncertainty_equals_a_dense_inverse_of_bruteforce_blocks(backend):
     model, cams = tiny_model(seed=3), cameras()
-    u = gaussian_uncertainty(model, cams, [0, 2, 4], BG, SETTINGS, sigma=0.5)
+    u = gaussian_uncertainty(model, cams, [0, 2, 4], BG, settings(backend), sigma=0.5)
     prior = sum(bruteforce_blocks(model, cams[v], sigma=0.5) for v in (0, 2, 4))  # [N, 14, 14]
     a = BlockInformation(prior).matrix  # the same ridge, added to the brute-force prior
     expected = torch.stack([torch.trace(torch.linalg.inv(block)[:3, :3]) for block in a])
     torch.testing.assert_close(u, expected, rtol=1e-3, atol=0.0)
     assert bool((u > 0).all())
-    more = gaussian_uncertainty(model, cams, [0, 1, 2, 3, 4, 5], BG, SETTINGS, sigma=0.5)
+    more = gaussian_uncertainty(model, cams, [0, 1, 2, 3, 4, 5], BG, settings(backend), sigma=0.5)
     assert bool((more <= u * (1 + 1e-6)).all())  # more views: no Gaussian more uncertain
 
 
-def test_uncertainty_map_composites_like_a_colour():
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_uncertainty_map_composites_like_a_colour(backend):
     model, cam = tiny_model(seed=1), cameras()[1]
-    alpha = render(cam, model, BG.float(), SETTINGS).alpha
-    torch.testing.assert_close(uncertainty_map(cam, model, torch.full((6,), 2.5), SETTINGS), 2.5 * alpha.float(),
+    raster = settings(backend)
+    alpha = render(cam, model, BG.float(), raster).alpha
+    torch.testing.assert_close(uncertainty_map(cam, model, torch.full((6,), 2.5), raster), 2.5 * alpha.float(),
                                rtol=1e-5, atol=1e-6)
     u1, u2 = torch.rand(6), torch.rand(6)
-    torch.testing.assert_close(uncertainty_map(cam, model, u1 + u2, SETTINGS),
-                               uncertainty_map(cam, model, u1, SETTINGS) + uncertainty_map(cam, model, u2, SETTINGS),
+    torch.testing.assert_close(uncertainty_map(cam, model, u1 + u2, raster),
+                               uncertainty_map(cam, model, u1, raster) + uncertainty_map(cam, model, u2, raster),
                                rtol=1e-5, atol=1e-6)
 
 
@@ -75,6 +78,9 @@ def test_recorded_train_views(tmp_path):
     assert recorded_train_views(tmp_path, 90, 9, "coverage") == [0, 5, 2, 7]
 
 
+# Slow (a training run, then render.py --uncertainty and metrics.py in subprocesses): the per-Gaussian variance
+# and the composited map are checked above, the CLIs' pipeline by tests/test_train_e2e.py.
+@pytest.mark.slow
 def test_render_uncertainty_then_metrics(tiny_scene, tmp_path):
     model = tmp_path / "m"
     r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(model), "--eval", "--iterations", "30",

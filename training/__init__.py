@@ -1,1 +1,2 @@
-"""Training-only pieces beside the trainer: the optimiser and its schedule, densification, parameter surgery."""
+"""The training engine (`engine.py`, driven by train.py) and its pieces: config, state, step, acquisition, the
+optimiser and its schedule, densification, parameter surgery, the wall-time estimate."""

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import torch
 
 from scene.gaussian_model import GaussianModel
+from utils.losses import LAMBDA_DSSIM
 
 
 @dataclass(frozen=True)
@@ -22,7 +23,7 @@ class OptimConfig:
     opacity_lr: float = field(default=0.05, metadata={"help": "opacity LR"})
     scaling_lr: float = field(default=5e-3, metadata={"help": "log-scale LR"})
     rotation_lr: float = field(default=1e-3, metadata={"help": "quaternion LR"})
-    lambda_dssim: float = field(default=0.2, metadata={"help": "weight of (1 - SSIM) in the loss"})
+    lambda_dssim: float = field(default=LAMBDA_DSSIM, metadata={"help": "weight of (1 - SSIM) in the loss"})
 
 
 PARAM_NAMES = ("means", "sh_dc", "sh_rest", "logit_opacities", "log_scales", "quats")

@@ -151,7 +151,7 @@ class RunTimeEstimator:
 
     @classmethod
     def for_run(cls, run) -> "RunTimeEstimator":
-        """The estimator of a train.py `Run` (config, scene, plan, selector, state), from its current iteration.
+        """The estimator of a `training.engine.Run` (config, scene, plan, selector, state), from its current iteration.
 
         The Fisher probe times `fisher_view_blocks` of the first view outside the training set on the model as it
         is at the estimate (the second of two calls, so a cold kernel cache's compile time is not counted).

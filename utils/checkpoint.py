@@ -13,6 +13,7 @@ import torch
 
 from utils.errors import UserError
 from utils.io import save_torch, write_json
+from utils.model_dir import CFG_ARGS, CHECKPOINTS_DIR, RUN_STATUS, checkpoint_file
 
 CHECKPOINT_FORMAT_VERSION = 1
 _CKPT_RE = re.compile(r"^chkpnt_(\d+)\.pt$")
@@ -28,7 +29,7 @@ class RunDirectory:
 
     @property
     def status_file(self) -> Path:
-        return self.path / "run_status.json"
+        return self.path / RUN_STATUS
 
     def status(self) -> dict[str, Any] | None:
         """The parsed status file, or None when there is none (or it is unreadable)."""
@@ -45,7 +46,7 @@ class RunDirectory:
         """Delete a previous run in this directory (only if it looks like one of ours)."""
         if not self.path.exists():
             return
-        if not ((self.path / "cfg_args").exists() or self.status_file.exists()):
+        if not ((self.path / CFG_ARGS).exists() or self.status_file.exists()):
             raise UserError(f"--overwrite refused: {self.path} is not a model directory of this project "
                             "(no cfg_args / run_status.json); pick another -m/--model_path")
         shutil.rmtree(self.path)
@@ -58,7 +59,7 @@ class RunDirectory:
         except OSError as exc:
             raise UserError(f"cannot write to model path {self.path} ({exc.strerror}); "
                             "choose a writable -m/--model_path") from None
-        write_json(self.path / "cfg_args", config)
+        write_json(self.path / CFG_ARGS, config)
 
     def progress(self, iteration: int, total_iterations: int, num_gaussians: int) -> None:
         """Record where a running run is (read by people and scripts watching a --quiet run, e.g. a grid job)."""
@@ -69,7 +70,7 @@ class RunDirectory:
         write_json(self.status_file, {"status": "complete", **summary})
 
     def _checkpoints(self) -> list[tuple[int, Path]]:
-        folder = self.path / "checkpoints"
+        folder = self.path / CHECKPOINTS_DIR
         if not folder.is_dir():
             return []
         found = [(int(m.group(1)), p) for p in folder.iterdir() if (m := _CKPT_RE.match(p.name))]
@@ -77,7 +78,7 @@ class RunDirectory:
 
     def save_checkpoint(self, state: dict[str, Any]) -> Path:
         """Write `checkpoints/chkpnt_<iteration>.pt` atomically and drop all but the newest few."""
-        path = self.path / "checkpoints" / f"chkpnt_{state['iteration']:07d}.pt"
+        path = checkpoint_file(self.path, state["iteration"])
         save_torch(path, {"format_version": CHECKPOINT_FORMAT_VERSION, **state})
         for _, old in self._checkpoints()[:-KEEP_CHECKPOINTS]:
             old.unlink(missing_ok=True)

@@ -78,3 +78,17 @@ def ssim(img1: torch.Tensor, img2: torch.Tensor) -> torch.Tensor:
     ssim_map = ((2 * mu12 + SSIM_C1) * (2 * sigma12 + SSIM_C2)) / (
         (mu1_sq + mu2_sq + SSIM_C1) * (sigma1_sq + sigma2_sq + SSIM_C2))
     return ssim_map.mean()
+
+
+LAMBDA_DSSIM = 0.2  # the 3DGS training loss: (1 - 0.2) L1 + 0.2 D-SSIM (the default of train.py --lambda_dssim)
+
+
+def photometric_loss(image: torch.Tensor, gt: torch.Tensor, lambda_dssim: float = LAMBDA_DSSIM) -> torch.Tensor:
+    """The 3DGS training loss (1 - lambda) L1 + lambda (1 - SSIM) of a rendered image against its target.
+
+    Args:
+        image, gt: Images in [0, 1]. [3, H, W]
+    Returns:
+        Scalar tensor (differentiable in both images).
+    """
+    return (1.0 - lambda_dssim) * l1_loss(image, gt) + lambda_dssim * (1.0 - ssim(image, gt))

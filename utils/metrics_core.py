@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import logging
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,11 +18,11 @@ from utils.errors import UserError
 from utils.image import load_rgba
 from utils.losses import psnr, ssim
 from utils.lpips_loader import LPIPS_MIN_SIDE, lpips_distance
+from utils.model_dir import METHOD_PATTERN
 from utils.uncertainty_metrics import ause, spearman
 
 log = logging.getLogger(__name__)
 
-METHOD_PATTERN = re.compile(r"ours_(\d+)")
 LOOKED_FOR = "test/ours_N/renders/*.png"
 
 

@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-from active.base import Selection, SelectionContext, Selector, check_k
+from active.base import Selection, SelectionContext, Selector, check_k, unscored_selection
+from active.farthest_point import farthest_point_picks
 from active.registry import register_selector
 from utils.errors import UserError
 
@@ -28,27 +29,6 @@ def coverage_points(ctx: SelectionContext, space: str) -> torch.Tensor:
         return centers
     offsets = centers - ctx.scene_center.double()
     return offsets / offsets.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-
-
-def farthest_point_picks(points: torch.Tensor, chosen: list[int], candidates: list[int], k: int) -> list[int]:
-    """`k` candidates by farthest-point sampling from `chosen` (no chosen views: start from the lowest candidate id).
-
-    Args:
-        points: one point per view id. [V, D]
-    """
-    pool = sorted(candidates)
-    cand = points[pool]  # [M, D]
-    if chosen:
-        dist = torch.cdist(cand, points[list(chosen)]).amin(dim=1)  # [M]
-    else:
-        dist = torch.full((len(pool),), float("inf"), dtype=points.dtype)
-    picks = []
-    for _ in range(min(k, len(pool))):
-        best = int(torch.argmax(dist))  # the first maximum: the lowest id
-        picks.append(pool[best])
-        dist = torch.minimum(dist, (cand - cand[best]).norm(dim=-1))
-        dist[best] = -1.0  # never again
-    return picks
 
 
 @dataclass(frozen=True)
@@ -78,7 +58,4 @@ class CoverageSelector(Selector):
         check_k(k)
         ids = farthest_point_picks(coverage_points(ctx, self.config.coverage_space), list(ctx.train_ids),
                                    ctx.candidate_ids, k)
-        if ctx.oracle is not None:
-            for view in ids:
-                ctx.oracle.commit(view)
-        return Selection(ids, [0.0] * len(ids), 0)
+        return unscored_selection(ctx, ids)

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import torch
 
 from active.base import Selection, SelectionContext, Selector, check_k
+from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from utils.errors import UserError
@@ -61,7 +62,7 @@ class FisherRFSelector(Selector):
         self.groups = parse_groups(config.fisherrf_params)
 
     def conservative_count(self, m: int, k: int) -> int:
-        return sum(m - j for j in range(min(k, m)))
+        return exhaustive_count(m, k)
 
     def columns(self, ctx: SelectionContext) -> torch.Tensor:
         """The oracle's columns of the scored groups. [P']"""

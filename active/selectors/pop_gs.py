@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from active.base import Selection, SelectionContext, Selector, check_k
+from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
 
 
@@ -13,7 +14,7 @@ class PopGSSelector(Selector):
     """
 
     def conservative_count(self, m: int, k: int) -> int:
-        return sum(m - j for j in range(min(k, m)))
+        return exhaustive_count(m, k)
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         check_k(k)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import torch
 
-from active.base import Selection, SelectionContext, Selector, check_k
+from active.base import Selection, SelectionContext, Selector, check_k, unscored_selection
 from active.registry import register_selector
 
 
@@ -24,7 +24,4 @@ class RandomSelector(Selector):
         check_k(k)
         order = torch.randperm(len(ctx.candidate_ids), generator=ctx.generator)[:k].tolist()
         ids = [ctx.candidate_ids[i] for i in order]
-        if ctx.oracle is not None:
-            for view in ids:
-                ctx.oracle.commit(view)
-        return Selection(ids, [0.0] * len(ids), 0)
+        return unscored_selection(ctx, ids)

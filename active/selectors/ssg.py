@@ -6,14 +6,13 @@ it, with gains cached across the picks. Conservative count: sum_{j < K} (p - j).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import torch
 
-from active.base import Selection, SelectionContext, Selector, check_eps, check_k
+from active.base import Selection, SelectionContext, Selector, check_k
+from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
 from active.selectors.lazy_greedy import lazy_greedy_select
-from active.selectors.lite_gs import subset_size
+from active.selectors.lite_gs import LiteGSConfig, subset_size
 
 
 def ssg_subset_size(m: int, k: int, eps: float) -> int:
@@ -21,26 +20,16 @@ def ssg_subset_size(m: int, k: int, eps: float) -> int:
     return min(m, max(k, subset_size(m, k, eps)))
 
 
-@dataclass(frozen=True)
-class SSGConfig:
-    eps: float = field(default=0.1, metadata={"help": "accuracy parameter in (0, 1): guarantee 1 - exp(-(1 - eps)), "
-                                                      "about M ln(1/eps) oracles per step"})
-
-    def __post_init__(self) -> None:
-        check_eps(self.eps)
-
-
-@register_selector("ssg", config=SSGConfig)
+@register_selector("ssg", config=LiteGSConfig)  # the same option, eps
 class SSGSelector(Selector):
     """Lazy greedy over one random subset drawn once per stage."""
 
-    def __init__(self, config: SSGConfig = SSGConfig()):
+    def __init__(self, config: LiteGSConfig = LiteGSConfig()):
         self.config = config
 
     def conservative_count(self, m: int, k: int) -> int:
         k = min(k, m)
-        p = ssg_subset_size(m, k, self.config.eps) if k else 0
-        return sum(p - j for j in range(k))
+        return exhaustive_count(ssg_subset_size(m, k, self.config.eps), k) if k else 0  # exhaustive over the subset
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         check_k(k)

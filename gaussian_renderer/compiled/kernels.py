@@ -3,7 +3,7 @@
 Each kernel runs in parallel over `num_slices` slices, one per thread (interleaved tiles; for binning, contiguous
 runs of the depth-sorted Gaussians), and works one pixel at a time, as the CUDA 3DGS kernel does: per tile it walks
 the tile's depth-sorted list and updates the tile's pixels, so nothing is padded and a tile stops as soon as all
-its pixels are finished. A kernel "tile" is a block of whole binning tiles (`ops.BLOCK_PIXELS`); a pair visits
+its pixels are finished. A kernel "tile" is a block of whole binning tiles (`tiles.BLOCK_PIXELS`); a pair visits
 only the pixels of its reach box (`_pixel_box`: the ellipse where alpha >= alpha_min can hold) clipped to its
 tile rectangle (`rects`, pixels), so the block size changes the work, never the pixels a Gaussian touches. All
 arrays are float64 (one compiled specialisation; the wrappers in `gaussian_renderer.compiled.ops` convert),

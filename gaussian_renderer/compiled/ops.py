@@ -1,7 +1,8 @@
 """Torch-facing wrappers of the numba kernels: binning, the differentiable rasterizer and the attribute Gram.
 
 Same signatures and results as the torch path in `gaussian_renderer.rasterize` / `fisher_partials` (its twin
-in the tests); CPU tensors only (the dispatch in `gaussian_renderer.compiled` sends CUDA tensors to torch).
+in the tests), binned by the same `gaussian_renderer.tiles.tile_ranges`; CPU tensors only (the dispatch in
+`gaussian_renderer.compiled` sends CUDA tensors to torch).
 """
 from __future__ import annotations
 
@@ -12,14 +13,12 @@ import numpy as np
 import torch
 
 from gaussian_renderer.compiled import kernels
-from gaussian_renderer.rasterize import NUM_GEOMETRY_ATTRIBUTES, tile_ranges
 from gaussian_renderer.settings import RasterSettings
+from gaussian_renderer.tiles import BLOCK_PIXELS, NUM_GEOMETRY_ATTRIBUTES, grid_size, tile_ranges
 from utils.errors import UserError
 
 _FLOAT_DTYPES = (torch.float32, torch.float64)
 
-
-BLOCK_PIXELS = 16  # side of the pixel blocks the kernels work on (measured: 8-16 beat 4; CUDA 3DGS also uses 16)
 
 
 @dataclass
@@ -75,7 +74,7 @@ def bin_gaussians_compiled(means2d: torch.Tensor, conics: torch.Tensor, opacitie
     tile_size = settings.tile_size
     per_block = max(1, BLOCK_PIXELS // tile_size)  # tiles per block side
     block = per_block * tile_size
-    blocks_x, blocks_y = -(-width // block), -(-height // block)
+    blocks_x, blocks_y = grid_size(width, height, block)
     with torch.no_grad():
         ids = torch.nonzero(radii > 0).squeeze(1)  # [n]
         ids = ids[torch.argsort(depths.detach()[ids], stable=True)]  # depth order, ties by id (as the torch path)

@@ -1,5 +1,5 @@
 """Plots of experiment runs (matplotlib, Agg backend): test PSNR vs views, oracle evaluations vs K, the eps
-trade-off, and the cameras each method chose. Each function takes the `Run` records of scripts/summarize.py
+trade-off, and the cameras each method chose. Each function takes the `Run` records of experiments/summary.py
 (attributes: setup, scene, method, k, options, options_label, seed, setting, stages, final, results, cameras),
 writes one PNG and returns its path, or returns None when the runs hold nothing to plot. No selector names here:
 series are labelled by method and options as the runs record them."""
@@ -17,11 +17,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from active.oracle_counts import mean_rounded_up  # noqa: E402
+
 
 def _per_step(runs, kind: str = "conservative") -> int | None:
     """Oracle evaluations per step over all steps of `runs`, rounded up."""
     counts = [s["oracle_calls"][kind] for r in runs for s in r.stages if "oracle_calls" in s]
-    return math.ceil(sum(counts) / len(counts)) if counts else None
+    return mean_rounded_up(counts) if counts else None
 
 
 def _label_axes(ax, xlabel: str, ylabel: str, title: str, legend_size: int) -> None:

@@ -1,0 +1,59 @@
+"""A grid never mixes runs made with different flags: grid.json and each started run's cfg_args are checked against
+the command line before anything runs."""
+from __future__ import annotations
+
+import shlex
+from pathlib import Path
+from typing import Any
+
+from experiments.grid_config import GridConfig
+from experiments.jobs import JobSpec, read_json
+from utils.errors import UserError
+from utils.model_dir import CFG_ARGS
+
+RECORD = "grid.json"
+# cfg_args entries that may differ between runs of one grid (paths, device, logging, restart flags)
+NOT_COMPARED = {"source_path", "model_path", "device", "quiet", "resume", "overwrite"}
+# train.py config field -> the grid flag that sets it
+GRID_FLAG = {"resolution": "--resolution", "num_random_points": "--num_points", "iterations": "--iter_scale",
+             "iters_per_view": "--iter_scale", "densify_from_iter": "--iter_scale",
+             "opacity_reset_interval": "--iter_scale"}
+
+
+def check_flags(cfg: GridConfig, specs: list[JobSpec]) -> None:
+    """Refuse an output directory holding runs made with other flags (grid.json, then each run's cfg_args)."""
+    record = read_json(cfg.setup_dir / RECORD)
+    if isinstance(record, dict):
+        for key, value in cfg.record().items():
+            if key in record and record[key] != value:
+                flag = "-- (extra train.py flags)" if key == "train_args" else f"--{key}"
+                raise UserError(f"{cfg.setup_dir} holds runs made with {flag} {_show(record[key])}, this command "
+                                f"has {_show(value)}; use another --out, or the same flags (runs made with "
+                                "different flags are never mixed in one summary)")
+    started = [(s, run) for s, run in zip(specs, cfg.runs) if (Path(s.model_dir) / CFG_ARGS).is_file()]
+    if not started:
+        return
+    # imported here: torch and the selectors load only when some run has started (grid.py stays quick otherwise)
+    from active.registry import list_selectors, selector_options
+    from training.config import parse_config  # the exact config train.py resolves from the same flags
+    any_selector_option = {o for m in list_selectors() for o in selector_options(m)}
+    for spec, run in started:
+        saved = read_json(Path(spec.model_dir) / CFG_ARGS)
+        if not isinstance(saved, dict):
+            continue  # unreadable: train.py itself reports it
+        expected = parse_config([*spec.train_args, "--device", "cpu"]).to_dict()
+        for group, values in expected.items():
+            for name, value in values.items():
+                if name in NOT_COMPARED or (name in any_selector_option
+                                            and name not in selector_options(run.method)):
+                    continue  # another selector's option: this run's method ignores it
+                old = saved.get(group, {}).get(name, value) if isinstance(saved.get(group), dict) else value
+                if old != value:
+                    flag = GRID_FLAG.get(name, "an extra train.py flag after --")
+                    raise UserError(f"{spec.model_dir} was trained with --{name} {_show(old)}, this grid asks for "
+                                    f"{_show(value)} (set by {flag}); use another --out, or the flags it was made "
+                                    "with (runs made with different flags are never mixed in one summary)")
+
+
+def _show(value: Any) -> str:
+    return shlex.join(value) if isinstance(value, list) else str(value)

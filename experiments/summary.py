@@ -1,0 +1,276 @@
+"""Aggregate experiment runs into paper-style tables (summary.md, summary.csv) and plots (PNG); the library behind
+scripts/summarize.py and the summary `scripts/grid.py` writes at the end of a grid.
+
+    runs = find_runs([root]); write_outputs(runs, out_dir); check_readable(runs)
+
+A run is a model directory holding selection.json, run_status.json or cfg_args. Its setup and scene come from the
+layout the experiment scripts write (OUT/<setup>/<scene>/<tag>/seed<S>); its method, K, selector options (e.g. eps)
+and seed from selection.json (or cfg_args before the first acquisition step). A run without results.json is listed
+as incomplete. Nothing here knows selector names: a method's setting is its name, K and the options its
+selection.json records.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import logging
+import re
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from statistics import mean, stdev
+
+from active.oracle_counts import exhaustive_count, mean_rounded_up
+from utils.errors import UserError
+from utils.io import atomic_write
+from utils.model_dir import CAMERAS, CFG_ARGS, METHOD_PATTERN, RESULTS, RUN_STATUS, SELECTION
+
+log = logging.getLogger(__name__)
+MARKERS = (SELECTION, RUN_STATUS, CFG_ARGS)  # any of these makes a directory a run
+
+
+@dataclass
+class Run:
+    """One model directory, as far as it could be read."""
+    path: Path
+    setup: str
+    scene: str
+    method: str
+    k: int
+    options: dict  # the selector's own options, as selection.json records them (e.g. {"eps": 0.1})
+    seed: int
+    stages: list[dict] = field(default_factory=list)  # selection.json "stages"
+    final: dict | None = None  # selection.json "final" (train_views, test_psnr after the last stage)
+    results: dict | None = None  # the newest ours_N entry of results.json
+    cameras: list[dict] = field(default_factory=list)  # cameras.json (test cameras, then train cameras)
+    problem: str = ""  # why the run has no results yet ("" when complete)
+
+    @property
+    def options_label(self) -> str:
+        """The selector options as 'name=value' words ('' for a selector without options)."""
+        return " ".join(f"{name}={value:g}" if isinstance(value, float) else f"{name}={value}"
+                        for name, value in sorted(self.options.items()))
+
+    @property
+    def setting(self) -> str:
+        """Method label with the settings that vary within a setup: K and the selector's options."""
+        return " ".join(part for part in (self.method, f"K={self.k}", self.options_label) if part)
+
+
+def _read_json(path: Path):
+    """Parsed JSON, or None (with a warning) when the file is unreadable or truncated."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        log.warning("skipping unreadable %s (%s)", path, type(exc).__name__)
+        return None
+
+
+def _layout(model: Path) -> tuple[str, str]:
+    """(setup, scene) from OUT/<setup>/<scene>/<tag>/seed<S>; falls back to the directory's ancestors."""
+    parts = model.resolve().parts
+    for i in range(len(parts) - 2, -1, -1):
+        if re.fullmatch(r"setup\d+|ablation_\w+", parts[i]):
+            return parts[i], parts[i + 1]
+    return (parts[-4] if len(parts) >= 4 else "-"), (parts[-3] if len(parts) >= 3 else "-")
+
+
+def load_run(model: Path) -> Run:
+    """Read one model directory; never raises for missing or unreadable pieces (they become `problem`)."""
+    setup, scene = _layout(model)
+    sel = _read_json(model / SELECTION) if (model / SELECTION).is_file() else None
+    cfg_args = _read_json(model / CFG_ARGS) if (model / CFG_ARGS).is_file() else None
+    if isinstance(sel, dict) and isinstance(sel.get("config"), dict):
+        cfg = sel["config"]
+    elif isinstance(cfg_args, dict):
+        cfg = {**cfg_args.get("active", {}), **cfg_args.get("run", {})}
+    else:
+        cfg = {}
+    options = cfg.get("selector_options")
+    run = Run(model, setup, scene, str(cfg.get("method") or "?"), int(cfg.get("views_per_step", 0)),
+              options if isinstance(options, dict) else {}, int(cfg.get("seed", -1)))
+    if isinstance(sel, dict):
+        run.stages = [s for s in sel.get("stages", []) if isinstance(s, dict)]
+        run.final = sel.get("final")
+    cameras = _read_json(model / CAMERAS) if (model / CAMERAS).is_file() else None
+    run.cameras = cameras if isinstance(cameras, list) else []
+    results = _read_json(model / RESULTS) if (model / RESULTS).is_file() else None
+    entries = {k: v for k, v in (results or {}).items() if METHOD_PATTERN.fullmatch(k) and isinstance(v, dict)}
+    if (model / SELECTION).is_file() and not isinstance(sel, dict):
+        run.problem = "no readable selection.json (truncated or not valid JSON)"
+    elif entries:
+        run.results = entries[max(entries, key=lambda k: int(k.split("_")[1]))]
+    elif not cfg:
+        run.problem = "no readable selection.json or cfg_args"
+    else:
+        status = _read_json(model / RUN_STATUS) if (model / RUN_STATUS).is_file() else None
+        state = status.get("status", "?") if isinstance(status, dict) else "not started"
+        run.problem = "no results.json (training " + ("complete: render + metrics missing" if state == "complete"
+                                                     else f"{state}, {len(run.stages)} step(s) done") + ")"
+    return run
+
+
+def find_runs(roots: list[str]) -> list[Run]:
+    """Every run below the roots (searched recursively), each once, in path order."""
+    dirs: set[Path] = set()
+    for root in roots:
+        if not Path(root).is_dir():
+            raise UserError(f"{root} is not a directory; pass the output root of an experiment script")
+        for marker in MARKERS:
+            dirs.update(p.parent.resolve() for p in Path(root).rglob(marker))
+    if not dirs:
+        raise UserError(f"no runs (selection.json / run_status.json) under {', '.join(roots)}; "
+                        "run an experiment script first")
+    return [load_run(d) for d in sorted(dirs)]
+
+
+def mean_std(values: list[float]) -> tuple[float | None, float | None]:
+    """(mean, sample standard deviation); std is None for fewer than two values, both None for none."""
+    if not values:
+        return None, None
+    return mean(values), (stdev(values) if len(values) > 1 else None)
+
+
+def per_step_count(runs: list[Run], kind: str) -> int | None:
+    """Oracle evaluations per acquisition step, averaged over all steps of the runs, rounded up (the paper's way)."""
+    counts = [s["oracle_calls"][kind] for r in runs for s in r.stages if "oracle_calls" in s]
+    return mean_rounded_up(counts) if counts else None
+
+
+def quality_rows(runs: list[Run]) -> list[dict]:
+    """Setup x method setting: PSNR / SSIM / LPIPS mean and std over the complete runs (seeds and scenes), and the
+    uncertainty metrics (Spearman, AUSE) when some run has them (render.py --uncertainty)."""
+    metrics = ("PSNR", "SSIM", "LPIPS")
+    if any(r.results is not None and "AUSE" in r.results for r in runs):
+        metrics += ("Spearman", "AUSE")
+    groups: dict[tuple, list[Run]] = defaultdict(list)
+    for r in runs:
+        groups[(r.setup, r.setting)].append(r)
+    rows = []
+    for (setup, setting), group in sorted(groups.items()):
+        done = [r.results for r in group if r.results is not None]
+        row = {"setup": setup, "method": setting, "scenes": " ".join(sorted({r.scene for r in group})),
+               "runs": len(done), "incomplete": len(group) - len(done)}
+        for metric in metrics:
+            values = [float(d[metric]) for d in done if isinstance(d.get(metric), (int, float))]
+            row[f"{metric}_mean"], row[f"{metric}_std"] = mean_std(values)
+        row["LPIPS_variant"] = next((d["LPIPS_variant"] for d in done
+                                     if d.get("LPIPS") is not None and d.get("LPIPS_variant")), "")
+        rows.append(row)
+    return rows
+
+
+def stage_exhaustive_count(stage: dict) -> int:
+    """What exhaustive greedy (every remaining candidate at every pick) evaluates in a step: sum_{j<k} (M - j)."""
+    return exhaustive_count(int(stage.get("candidates", 0)), len(stage.get("selected", [])))
+
+
+def oracle_rows(runs: list[Run]) -> list[dict]:
+    """Setup x scene x K x (method, options): oracle evaluations per step and the reduction relative to exhaustive
+    greedy on the same steps (sum_j (M - j) per step, averaged and rounded up like the counts)."""
+    groups: dict[tuple, dict[tuple, list[Run]]] = defaultdict(lambda: defaultdict(list))
+    for r in runs:
+        if any(s.get("oracle_calls", {}).get("conservative") for s in r.stages):
+            groups[(r.setup, r.scene, r.k)][(r.method, r.options_label)].append(r)
+    rows = []
+    for (setup, scene, k), by_method in sorted(groups.items()):
+        for (method, options), group in sorted(by_method.items()):
+            cons, evaluated = per_step_count(group, "conservative"), per_step_count(group, "evaluated")
+            steps = [stage_exhaustive_count(s) for r in group for s in r.stages if "oracle_calls" in s]
+            exhaustive = mean_rounded_up(steps) if steps else None
+            reduction = 100.0 * (1.0 - cons / exhaustive) if exhaustive and cons is not None else None
+            rows.append({"setup": setup, "scene": scene, "K": k, "method": method, "options": options,
+                         "runs": len(group), "steps": sum(len(r.stages) for r in group), "conservative": cons,
+                         "evaluated": evaluated, "exhaustive": exhaustive, "reduction_%": reduction})
+    return rows
+
+
+def time_rows(runs: list[Run]) -> list[dict]:
+    """Setup x method setting: selection wall time (select_seconds, which includes the Fisher blocks) and the
+    Fisher part, per run and per acquisition step."""
+    groups: dict[tuple, list[Run]] = defaultdict(list)
+    for r in runs:
+        if r.stages:
+            groups[(r.setup, r.setting)].append(r)
+    rows = []
+    for (setup, setting), group in sorted(groups.items()):
+        steps = [s for r in group for s in r.stages]
+        row = {"setup": setup, "method": setting, "runs": len(group), "steps": len(steps)}
+        row["select_s_per_run_mean"], row["select_s_per_run_std"] = mean_std(
+            [sum(float(s.get("select_seconds", 0.0)) for s in r.stages) for r in group])
+        row["fisher_s_per_run_mean"], row["fisher_s_per_run_std"] = mean_std(
+            [sum(float(s.get("fisher_seconds", 0.0)) for s in r.stages) for r in group])
+        row["select_s_per_step"] = mean(float(s.get("select_seconds", 0.0)) for s in steps)
+        rows.append(row)
+    return rows
+
+
+def _cell(row: dict, col: str, digits: int) -> str:
+    """Markdown cell: 'mean ± std' for a *_mean column (std omitted when undefined), plain value otherwise."""
+    value = row[col]
+    if value is None:
+        return "n/a"
+    if isinstance(value, float):
+        text = f"{value:.{digits}f}"
+        std = row.get(col[:-5] + "_std") if col.endswith("_mean") else None
+        return text + (f" ± {std:.{digits}f}" if std is not None else "")
+    return str(value)
+
+
+def markdown_table(rows: list[dict], digits: dict[str, int]) -> str:
+    """Rows as a markdown table; *_std columns fold into their *_mean column, headers lose the _mean suffix."""
+    if not rows:
+        return "(none)\n"
+    cols = [c for c in rows[0] if not c.endswith("_std")]
+    head = [c[:-5] if c.endswith("_mean") else c for c in cols]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in cols) + "|"]
+    for row in rows:
+        lines.append("| " + " | ".join(_cell(row, c, digits.get(c.split("_")[0], 2)) for c in cols) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_outputs(runs: list[Run], out: Path) -> list[Path]:
+    """Write summary.md, summary.csv and the plots into `out`; returns the files written."""
+    from experiments.plots import write_all  # matplotlib: imported only when plotting
+
+    out.mkdir(parents=True, exist_ok=True)
+    quality, oracles, times = quality_rows(runs), oracle_rows(runs), time_rows(runs)
+    digits = {"PSNR": 2, "SSIM": 4, "LPIPS": 4, "Spearman": 3, "AUSE": 4, "select": 1, "fisher": 1, "reduction": 2}
+    incomplete = [r for r in runs if r.results is None]
+    md = ["# Summary", "",
+          f"{len(runs)} runs ({len(incomplete)} incomplete) from {len({r.setup for r in runs})} setup(s). "
+          "mean ± std: sample standard deviation over seeds and scenes (no ± for a single run).", "",
+          "## Quality on the test views", "", markdown_table(quality, digits),
+          "## Oracle evaluations per acquisition step", "",
+          "Averaged over steps (and seeds), rounded up, as the paper reports. conservative: every sampled candidate "
+          "counts; evaluated: gains actually computed. exhaustive: what exhaustive greedy evaluates on the "
+          "same steps, sum_j (M - j); reduction: conservative count relative to it.", "",
+          markdown_table(oracles, digits),
+          "## Selection wall time (seconds)", "",
+          "select_s = selection time per acquisition step including the Fisher blocks; fisher_s = the Fisher part.",
+          "", markdown_table(times, digits)]
+    if incomplete:
+        md += ["## Incomplete runs", ""] + [f"- `{r.path}`: {r.problem}" for r in incomplete] + [""]
+    atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text("\n".join(md)))
+
+    tables = [("quality", quality), ("oracles", oracles), ("time", times)]
+    columns = ["table"] + list(dict.fromkeys(c for _, rows in tables for row in rows for c in row))
+
+    def write_csv(tmp: str) -> None:
+        with open(tmp, "w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=columns, restval="")
+            writer.writeheader()
+            for name, rows in tables:
+                for row in rows:
+                    writer.writerow({"table": name, **{c: "" if v is None else v for c, v in row.items()}})
+    atomic_write(out / "summary.csv", write_csv)
+    return [out / "summary.md", out / "summary.csv"] + write_all(runs, out)
+
+
+def check_readable(runs: list[Run]) -> None:
+    """Raise UserError naming the first run whose selection.json is truncated (the summary lists them as
+    incomplete; call this after `write_outputs`)."""
+    broken = [r for r in runs if r.problem and "truncated" in r.problem]
+    if broken:
+        raise UserError(f"{broken[0].path / SELECTION} is truncated or not valid JSON ({len(broken)} run(s) "
+                        "affected, listed as incomplete in the summary); rerun those runs or delete their directories")

@@ -1,0 +1,94 @@
+"""A training run's configuration: the config groups, train.py's parser, the flag checks and the run's selector."""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from active import Selector, build_selector_from, list_selectors
+from active.registry import selector_options_dataclass
+from arguments import ActiveConfig, ModelConfig, PipelineConfig, RunConfig, add_config_args, config_from_args, config_to_dict
+from scene.trained import raster_settings
+from training.densify import DensifyConfig
+from training.optim import OptimConfig
+from utils.errors import UserError
+
+SelectorOptions = selector_options_dataclass()  # one flag per option of the registered selectors (e.g. --eps)
+
+# The config groups of a run, once: (attribute of TrainConfig, dataclass, --help section title).
+CONFIG_GROUPS: tuple[tuple[str, type, str], ...] = (
+    ("model", ModelConfig, "Model"),
+    ("pipeline", PipelineConfig, "Pipeline"),
+    ("optim", OptimConfig, "Optimization"),
+    ("densify", DensifyConfig, "Densification"),
+    ("active", ActiveConfig, "Active view selection"),
+    ("selector", SelectorOptions, "Selector options (each used by the selectors named in brackets)"),
+    ("run", RunConfig, "Run"),
+)
+
+
+@dataclass
+class TrainConfig:
+    """All config groups of one run (`CONFIG_GROUPS`)."""
+
+    model: ModelConfig
+    pipeline: PipelineConfig
+    optim: OptimConfig
+    densify: DensifyConfig
+    active: ActiveConfig
+    selector: Any  # SelectorOptions
+    run: RunConfig
+
+    def to_dict(self) -> dict[str, Any]:
+        return {name: config_to_dict(getattr(self, name)) for name, _, _ in CONFIG_GROUPS}
+
+
+def build_parser(description: str | None = None) -> argparse.ArgumentParser:
+    """train.py's parser: one --help section per config group, --method listing the registered selectors."""
+    parser = argparse.ArgumentParser(description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    for _, cls, title in CONFIG_GROUPS:
+        add_config_args(parser, cls, title)
+    for action in parser._actions:  # list the registered selectors in --method's help
+        if action.dest == "method":
+            action.help = f"view selector, one of {', '.join(list_selectors())}; empty = train on all training views"
+    return parser
+
+
+def parse_config(argv: list[str] | None = None, description: str | None = None) -> TrainConfig:
+    """The validated config of train.py's flags `argv` (default: sys.argv[1:])."""
+    ns = build_parser(description).parse_args(argv)
+    cfg = TrainConfig(**{name: config_from_args(cls, ns) for name, cls, _ in CONFIG_GROUPS})
+    validate_config(cfg)
+    return cfg
+
+
+def validate_config(cfg: TrainConfig) -> None:
+    """Reject bad flag values with one clear line each (the selector's own options by its config)."""
+    if not cfg.model.source_path:
+        raise UserError("no dataset given: pass -s/--source_path DIR (e.g. data/builtin, made by `python -m scene.builtin data/builtin`)")
+    if cfg.run.iterations <= 0:
+        raise UserError(f"--iterations must be positive, got {cfg.run.iterations}")
+    if cfg.model.device == "cuda" and not torch.cuda.is_available():
+        raise UserError("--device cuda was asked for but torch sees no CUDA device; use --device cpu")
+    raster_settings(cfg.pipeline)  # a bad or unavailable --raster_backend fails before anything is written
+    a = cfg.active
+    if a.method:
+        make_selector(cfg)
+        if a.sigma <= 0:
+            raise UserError(f"--sigma must be positive, got {a.sigma}")
+
+
+def make_selector(cfg: TrainConfig) -> Selector:
+    """The run's selector, built from --method and the selector flags it declares (validated by its config)."""
+    if cfg.active.method not in list_selectors():
+        raise UserError(f"unknown --method {cfg.active.method!r}; choose one of: {', '.join(list_selectors())}")
+    return build_selector_from(cfg.active.method, config_to_dict(cfg.selector))
+
+
+def default_model_path(cfg: TrainConfig) -> str:
+    """output/<scene>[_<method>] when no -m is given."""
+    name = Path(cfg.model.source_path.rstrip("/")).name or "scene"
+    return str(Path("output") / (f"{name}_{cfg.active.method}" if cfg.active.method else name))

@@ -15,15 +15,22 @@ Approximation (as in the LiTe-GS paper, following FisherRF/POP-GS):
 
 Diagonal variant (FisherRF's approximation): `fisher_view_diagonals` gives diag(H_v) [N, P] from the same Gram and
 projection Jacobian without forming the blocks (diag(J^T G J)_p = sum_ab J_ap G_ab J_bp), over every raw parameter
-group; `DiagonalFisherOracle` serves it to selectors whose `oracle_kind` is "diagonal". `build_oracle(kind, ...)` is
-the one entry point train.py calls, with the kind the selector declares.
+group; `DiagonalFisherOracle` serves it to selectors whose `oracle_kind` is "diagonal". `fisher_view_diagonals_reference`
+reproduces what FisherRF's modified rasterizer computes instead (docs/deviations.md): for geometry and opacity the
+square of the channel-summed pixel partial, and the exp / sigmoid derivative of log_scales / logit_opacities applied
+once after squaring; the oracle kind "diagonal_reference" serves it. `build_oracle(kind, ...)` is the one entry point
+train.py calls, with the kind the selector declares.
 
 `FisherOracle.build(...)` returns the one object the selectors call (`gain`, `commit`, `evaluated`: the
 `GainOracle` protocol, by inheritance from `active.logdet.BlockGainOracle`); its `FisherViewBlocks` supplies the
-blocks. Modes: "cached" keeps each candidate's blocks for the stage (an oracle is then a batched log-det update);
-"streaming" keeps nothing and recomputes a view's blocks at every oracle (memory-lean). When the cache estimate
-exceeds the memory budget, or the device runs out of memory while caching, cached mode falls back to streaming and
-says so once.
+candidates' information as `fisher_view_factors`: only the Gaussians the view sees (a non-zero attribute Gram), each
+block as the factor R_i = sigma^-1 J_proj,i^T G_i+^1/2 [P, A] (G_i+ = G_i with its roundoff-negative eigenvalues
+clamped: the PSD projection, made once per view), so H_v,i = R_i R_i^T and a gain or commit touches the visible
+blocks only. Factors are stored as float32 (`FACTOR_STORAGE`; arithmetic stays float64). Modes: "cached" keeps each
+candidate's factors for the stage (an oracle is then a log-det update); "streaming" keeps nothing and recomputes a
+view's factors at every oracle (memory-lean). When the cache estimate (the training views' visible counts times the
+candidates) exceeds the memory budget, one view alone does not fit it, or the device runs out of memory while
+caching, cached mode falls back to streaming and says so once.
 """
 from __future__ import annotations
 
@@ -35,12 +42,13 @@ from typing import Callable
 
 import torch
 
-from active.logdet import BlockGainOracle, BlockInformation
+from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite
 from gaussian_renderer import RasterSettings, attribute_gram, project_gaussians, projection_jacobian
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from gaussian_renderer.sh import sh_to_colors
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
+from utils.errors import UserError
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +56,7 @@ FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian f
     "default": ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
     "full_sh": ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest"),
 }
+FACTOR_STORAGE = torch.float32  # dtype of cached view factors (the float32 accuracy test: tests/test_view_factors.py)
 
 
 def available_memory_bytes() -> int:
@@ -75,6 +84,31 @@ def fisher_view_blocks(gaussians: GaussianModel, camera: Camera, background: tor
     return blocks / (sigma * sigma)
 
 
+def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
+                        settings: RasterSettings, sigma: float = 1.0,
+                        param_groups: tuple[str, ...] = FISHER_PARAM_GROUPS["default"]) -> ViewFactors:
+    """`fisher_view_blocks` over the Gaussians the view sees, as PSD factors: H_v,i = R_i R_i^T with
+    R_i = sigma^-1 J_proj,i^T V_i diag(max(lambda_i, 0))^1/2 from the eigen-decomposition G_i = V_i diag(lambda_i) V_i^T
+    of the attribute Gram. The projection Jacobian is computed for the visible Gaussians only.
+
+    Returns:
+        indices [n] of the Gaussians with a non-zero Gram, factors [n, P, A] float64.
+    """
+    with torch.no_grad():
+        for group in param_groups:  # the dense blocks of every Gaussian would carry a NaN parameter: refuse it too
+            check_finite(gaussians.params[group], "view", gaussians.num_gaussians)
+        gram = _attribute_gram(gaussians, camera, background, settings)  # [N, A, A] float64
+        check_finite(gram, "view", gaussians.num_gaussians)
+        indices = torch.nonzero(gram.flatten(1).abs().amax(dim=1) > 0).flatten() if gram.shape[0] else \
+            torch.zeros(0, dtype=torch.long, device=gram.device)  # [n]
+        gram = gram[indices]  # [n, A, A]
+        jac = _projection_jacobian(gaussians, camera, param_groups, indices)  # [n, A, P]
+        check_finite(jac, "view", gaussians.num_gaussians)
+        evals, evecs = torch.linalg.eigh(gram)  # [n, A], [n, A, A]
+        root = evecs * (evals.clamp_min(0.0).sqrt() / sigma)[:, None, :]  # G+^1/2 / sigma [n, A, A]
+    return ViewFactors(indices, jac.transpose(1, 2) @ root, gaussians.num_gaussians)  # R [n, P, A]
+
+
 def fisher_view_diagonals(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
                           settings: RasterSettings, sigma: float = 1.0,
                           param_groups: tuple[str, ...] = RAW_PARAMETER_GROUPS) -> torch.Tensor:
@@ -86,6 +120,58 @@ def fisher_view_diagonals(gaussians: GaussianModel, camera: Camera, background: 
     """
     jac, gram = _jacobian_and_gram(gaussians, camera, background, settings, param_groups)
     return torch.einsum("nap,nab,nbp->np", jac, gram, jac) / (sigma * sigma)
+
+
+REFERENCE_DIAGONAL_GROUPS = ("means", "log_scales", "logit_opacities", "sh_dc", "sh_rest")  # FisherRF: no rotation
+
+
+def fisher_view_diagonals_reference(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
+                                    settings: RasterSettings, sigma: float = 1.0,
+                                    param_groups: tuple[str, ...] = REFERENCE_DIAGONAL_GROUPS) -> torch.Tensor:
+    """The diagonal FisherRF's code accumulates (`diff/cuda_rasterizer/backward.cu`, `renderCUDAFused` with
+    `atomicAddSquare`, pixel gradient 1 on every channel, then PyTorch's activation backward), per raw parameter:
+
+    * geometry (means, log_scales, logit_opacities): sigma^-2 sum_pixels (sum_channels dI_pc/dtheta)^2, the square
+      of the channel-summed partial, with the activation derivative f'(theta) (exp for log_scales, sigmoid for
+      logit_opacities) applied once after squaring: f' sum_p (sum_c dI_pc/da)^2 instead of f'^2 (...);
+    * colour (sh_dc, sh_rest): as `fisher_view_diagonals` (a coefficient reaches one channel, so both agree).
+
+    The channel-summed partials are those of a one-channel render whose colour is the sum of the three (compositing
+    is linear in colour). Rotation is not reproduced (FisherRF scores without it).
+
+    Returns:
+        float64 diagonals. [N, P]
+    Raises:
+        UserError: "quats" in `param_groups`.
+    """
+    if "quats" in param_groups:
+        raise UserError("the reference (FisherRF-code) Fisher diagonal has no rotation columns; drop quats from "
+                        "--fisherrf_params")
+    jac, gram = _jacobian_and_gram(gaussians, camera, background, settings, param_groups)  # [N, A, P], [N, A, A]
+    exact = torch.einsum("nap,nab,nbp->np", jac, gram, jac)  # per-channel squares [N, P]
+    with torch.no_grad():
+        proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, camera.viewmat,
+                                 camera.intrinsics, camera.width, camera.height)
+        colors = sh_to_colors(gaussians.sh_coeffs, gaussians.means, camera.camera_center, gaussians.active_sh_degree)
+        gram_sum = attribute_gram(proj.means2d, proj.conics, gaussians.opacities, colors.sum(1, keepdim=True),
+                                  proj.depths, proj.radii, camera.width, camera.height,
+                                  background.sum().reshape(1), settings)  # [N, 7, 7] of the channel-summed image
+    lift = torch.zeros(9, 7, dtype=torch.float64, device=gram_sum.device)  # channel-summed partials, 7 -> 9 attributes
+    lift[:6, :6] = torch.eye(6, dtype=torch.float64, device=gram_sum.device)
+    lift[6:, 6] = 1.0  # d(sum_c I_c)/d colour_c' = the blending weight, for every c'
+    summed = torch.einsum("nap,nab,nbp->np", jac, lift @ gram_sum @ lift.T, jac)  # [N, P]
+    columns = parameter_columns(gaussians, param_groups)
+    diag = summed.clone()
+    for group in ("sh_dc", "sh_rest"):
+        if group in columns:
+            diag[:, columns[group]] = exact[:, columns[group]]
+    params = gaussians.params
+    if "log_scales" in columns:  # exp' = exp: f'^2 S -> f' S
+        diag[:, columns["log_scales"]] /= params["log_scales"].detach().double().exp().clamp_min(1e-300)
+    if "logit_opacities" in columns:  # sigmoid' = o (1 - o)
+        o = torch.sigmoid(params["logit_opacities"].detach().double()).reshape(-1, 1)
+        diag[:, columns["logit_opacities"]] /= (o * (1 - o)).clamp_min(1e-300)
+    return diag / (sigma * sigma)
 
 
 def parameter_columns(gaussians: GaussianModel, param_groups: tuple[str, ...]) -> dict[str, slice]:
@@ -103,24 +189,36 @@ def _jacobian_and_gram(gaussians: GaussianModel, camera: Camera, background: tor
                        param_groups: tuple[str, ...]) -> tuple[torch.Tensor, torch.Tensor]:
     """J_proj [N, A, P] and G [N, A, A] of one view, float64."""
     with torch.no_grad():
-        proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, camera.viewmat,
-                                 camera.intrinsics, camera.width, camera.height)
-        colors = sh_to_colors(gaussians.sh_coeffs, gaussians.means, camera.camera_center,
-                              gaussians.active_sh_degree)
-        gram = attribute_gram(proj.means2d, proj.conics, gaussians.opacities, colors, proj.depths, proj.radii,
-                              camera.width, camera.height, background, settings)  # [N, A, A] float64
+        gram = _attribute_gram(gaussians, camera, background, settings)
+    return _projection_jacobian(gaussians, camera, param_groups), gram
+
+
+def _attribute_gram(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
+                    settings: RasterSettings) -> torch.Tensor:
+    """G [N, A, A] of one view (render + per-Gaussian Gram), float64."""
+    proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, camera.viewmat,
+                             camera.intrinsics, camera.width, camera.height)
+    colors = sh_to_colors(gaussians.sh_coeffs, gaussians.means, camera.camera_center, gaussians.active_sh_degree)
+    return attribute_gram(proj.means2d, proj.conics, gaussians.opacities, colors, proj.depths, proj.radii,
+                          camera.width, camera.height, background, settings)
+
+
+def _projection_jacobian(gaussians: GaussianModel, camera: Camera, param_groups: tuple[str, ...],
+                         indices: torch.Tensor | None = None) -> torch.Tensor:
+    """J_proj [N, A, P] float64 of every Gaussian, or [n, A, P] of `indices` (Gaussians are independent)."""
+    pick = (lambda t: t.detach()) if indices is None else (lambda t: t.detach()[indices])
     params = gaussians.params
-    jac = projection_jacobian(params["means"].detach(), params["quats"].detach(), params["log_scales"].detach(),
-                              params["logit_opacities"].detach(), gaussians.sh_coeffs.detach(),
-                              gaussians.active_sh_degree, camera.viewmat, camera.intrinsics, camera.width,
-                              camera.height, param_groups=param_groups).double()  # [N, A, P]
-    return jac, gram
+    return projection_jacobian(pick(params["means"]), pick(params["quats"]), pick(params["log_scales"]),
+                               pick(params["logit_opacities"]), pick(gaussians.sh_coeffs), gaussians.active_sh_degree,
+                               camera.viewmat, camera.intrinsics, camera.width, camera.height,
+                               param_groups=param_groups).double()
 
 
 @dataclass
 class FisherViewBlocks:
-    """Per-view Fisher blocks of one model: computed on demand, kept in an LRU cache (cached mode) or not (streaming).
-    With `diagonal` set it supplies the blocks' diagonals instead ([N, P], `fisher_view_diagonals`)."""
+    """Per-view Fisher information of one model: computed on demand, kept in an LRU cache bounded in bytes (cached
+    mode) or not (streaming). Candidates come as `ViewFactors` stored in `FACTOR_STORAGE`; with `diagonal` set it
+    supplies the blocks' diagonals instead ([N, P], `fisher_view_diagonals`)."""
 
     gaussians: GaussianModel
     cameras: list[Camera]
@@ -130,20 +228,29 @@ class FisherViewBlocks:
     param_groups: tuple[str, ...]
     streaming: bool
     cache_bytes: int
-    diagonal: bool = False  # diagonals [N, P] instead of blocks [N, P, P]
+    diagonal: bool = False  # diagonals [N, P] instead of factors
+    reference: bool = False  # with `diagonal`: FisherRF's code's diagonals (`fisher_view_diagonals_reference`)
     views_computed: int = 0  # distinct views whose blocks were computed (candidates; prior views not counted)
     fisher_seconds: float = 0.0  # time spent computing blocks, prior included
-    _cache: "OrderedDict[int, torch.Tensor]" = field(default_factory=OrderedDict)
+    _cache: "OrderedDict[int, ViewFactors | torch.Tensor]" = field(default_factory=OrderedDict)
+    _cached_bytes: int = 0
     _seen: set = field(default_factory=set)
 
-    def compute(self, view_id: int) -> torch.Tensor:
-        """The blocks (or diagonals) of `cameras[view_id]`, timed, never cached. [N, P, P] or [N, P] float64"""
+    def compute(self, view_id: int) -> ViewFactors | torch.Tensor:
+        """The factors (float64) or diagonals [N, P] of `cameras[view_id]`, timed, never cached."""
         t0 = time.perf_counter()
-        kernel = fisher_view_diagonals if self.diagonal else fisher_view_blocks
+        kernel = ((fisher_view_diagonals_reference if self.reference else fisher_view_diagonals) if self.diagonal
+                  else fisher_view_factors)
         blocks = kernel(self.gaussians, self.cameras[view_id], self.background, self.settings,
-                                    self.sigma, self.param_groups)
+                        self.sigma, self.param_groups)
         self.fisher_seconds += time.perf_counter() - t0
         return blocks
+
+    @staticmethod
+    def stored(blocks: ViewFactors | torch.Tensor) -> ViewFactors | torch.Tensor:
+        """What the cache keeps (and streaming mode serves, so both modes give the same gains): factors in
+        `FACTOR_STORAGE`, diagonals unchanged."""
+        return blocks.stored_as(FACTOR_STORAGE) if isinstance(blocks, ViewFactors) else blocks
 
     def use_streaming(self, reason: str) -> None:
         """Drop the cache and recompute from now on (logged once)."""
@@ -151,28 +258,39 @@ class FisherViewBlocks:
             log.warning("%s: switching the Fisher oracle to streaming mode", reason)
         self.streaming = True
         self._cache.clear()
+        self._cached_bytes = 0
 
-    def __call__(self, view_id: int) -> torch.Tensor:
-        """Blocks of one candidate view (from the cache, or computed). [N, P, P]"""
+    def __call__(self, view_id: int) -> ViewFactors | torch.Tensor:
+        """The information of one candidate view (from the cache, or computed)."""
         if view_id in self._cache:
             self._cache.move_to_end(view_id)
             return self._cache[view_id]
         try:
-            blocks = self.compute(view_id)
+            blocks = self.stored(self.compute(view_id))
         except torch.cuda.OutOfMemoryError:
             if self.streaming or not self._cache:
                 raise
             self.use_streaming(f"out of device memory with {len(self._cache)} views cached")
-            blocks = self.compute(view_id)
+            blocks = self.stored(self.compute(view_id))
         if view_id not in self._seen:
             self._seen.add(view_id)
             self.views_computed += 1
         if not self.streaming:
+            size = nbytes(blocks)
+            if size > self.cache_bytes:
+                self.use_streaming(f"one view's Fisher information needs {size / 2**20:.1f} MB, more than the "
+                                   f"cache budget of {self.cache_bytes / 2**20:.1f} MB (--fisher_cache_mb)")
+                return blocks
             self._cache[view_id] = blocks
-            size = blocks.numel() * blocks.element_size()
-            while len(self._cache) > 1 and len(self._cache) * size > self.cache_bytes:
-                self._cache.popitem(last=False)
+            self._cached_bytes += size
+            while len(self._cache) > 1 and self._cached_bytes > self.cache_bytes:
+                self._cached_bytes -= nbytes(self._cache.popitem(last=False)[1])
         return blocks
+
+
+def nbytes(blocks: ViewFactors | torch.Tensor) -> int:
+    """Bytes held by a view's factors or diagonals."""
+    return blocks.nbytes if isinstance(blocks, ViewFactors) else blocks.numel() * blocks.element_size()
 
 
 class _ViewStatistics:
@@ -243,11 +361,13 @@ class DiagonalFisherOracle(_ViewStatistics, DiagonalGainOracle):
 
     @classmethod
     def build(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int], background: torch.Tensor,
-              settings: RasterSettings, *, sigma: float = 1.0, mode: str = "cached",
-              cache_mb: int = 0) -> "DiagonalFisherOracle":
-        """The prior diagonal of `train_views` and an oracle over the other views of `cameras`."""
-        source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, RAW_PARAMETER_GROUPS,
-                                  mode == "streaming", _cache_budget(cache_mb), diagonal=True)
+              settings: RasterSettings, *, sigma: float = 1.0, mode: str = "cached", cache_mb: int = 0,
+              reference: bool = False) -> "DiagonalFisherOracle":
+        """The prior diagonal of `train_views` and an oracle over the other views of `cameras` (with `reference`,
+        FisherRF's code's diagonal over `REFERENCE_DIAGONAL_GROUPS`)."""
+        groups = REFERENCE_DIAGONAL_GROUPS if reference else RAW_PARAMETER_GROUPS
+        source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, groups, mode == "streaming",
+                                  _cache_budget(cache_mb), diagonal=True, reference=reference)
         return cls(_prior(source, train_views, len(cameras)), source)
 
 
@@ -256,15 +376,17 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
                  delta_abs: float = 1e-8, param_groups: str = "default", mode: str = "cached",
                  cache_mb: int = 0) -> FisherOracle | DiagonalFisherOracle:
     """The oracle of `kind` (a selector's `oracle_kind`): "logdet" -> `FisherOracle` (ridge and `param_groups`
-    apply), "diagonal" -> `DiagonalFisherOracle` (every raw parameter group, no ridge)."""
+    apply), "diagonal" -> `DiagonalFisherOracle` (every raw parameter group, no ridge), "diagonal_reference" -> the
+    same over FisherRF's code's diagonal (`fisher_view_diagonals_reference`)."""
     if kind == "logdet":
         return FisherOracle.build(gaussians, cameras, train_views, background, settings, sigma=sigma,
                                   delta_rel=delta_rel, delta_abs=delta_abs, param_groups=param_groups, mode=mode,
                                   cache_mb=cache_mb)
-    if kind == "diagonal":
+    if kind in ("diagonal", "diagonal_reference"):
         return DiagonalFisherOracle.build(gaussians, cameras, train_views, background, settings, sigma=sigma,
-                                          mode=mode, cache_mb=cache_mb)
-    raise ValueError(f"unknown oracle kind {kind!r} (a selector's oracle_kind is 'logdet' or 'diagonal')")
+                                          mode=mode, cache_mb=cache_mb, reference=kind == "diagonal_reference")
+    raise ValueError(f"unknown oracle kind {kind!r} (a selector's oracle_kind is 'logdet', 'diagonal' or "
+                     "'diagonal_reference')")
 
 
 def _cache_budget(cache_mb: int) -> int:
@@ -284,11 +406,21 @@ def summed_views(compute: Callable[[int], torch.Tensor], views: list[int]) -> to
 
 def _prior(source: FisherViewBlocks, train_views: list[int], num_views: int) -> torch.Tensor:
     """The sum of the training views' blocks (or diagonals); switches `source` to streaming when the candidates'
-    cache would exceed its budget. [N, P, P] or [N, P]"""
-    prior = summed_views(source.compute, train_views)
+    cache would exceed its budget (estimated from the training views' stored sizes). [N, P, P] or [N, P]"""
+    sizes = []
+
+    def dense_view(v: int) -> torch.Tensor:  # a training view's blocks (factors scattered to dense) or diagonals
+        blocks = source.compute(v)
+        sizes.append(nbytes(source.stored(blocks)))
+        return blocks.dense() if isinstance(blocks, ViewFactors) else blocks
+
+    prior = summed_views(dense_view, train_views)
     num_candidates = num_views - len(train_views)
-    estimate = num_candidates * prior.numel() * prior.element_size()
-    if not source.streaming and estimate > source.cache_bytes:
+    estimate = num_candidates * sum(sizes) / len(sizes)
+    if not source.streaming and max(sizes) > source.cache_bytes:
+        source.use_streaming(f"one view's Fisher information needs about {max(sizes) / 2**20:.1f} MB, more than the "
+                             f"cache budget of {source.cache_bytes / 2**20:.1f} MB (--fisher_cache_mb)")
+    elif not source.streaming and estimate > source.cache_bytes:
         source.use_streaming(f"the Fisher cache would need {estimate / 2**20:.0f} MB for {num_candidates} "
                              f"candidate views (budget {source.cache_bytes / 2**20:.0f} MB, --fisher_cache_mb)")
     return prior

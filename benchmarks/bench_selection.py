@@ -1,6 +1,7 @@
 """Selection cost: Fisher blocks vs a training step, one oracle, and the oracle selectors over K and their options.
 
-    python benchmarks/bench_selection.py --model output/quickstart --mode cached
+    python benchmarks/bench_selection.py                      # the quickstart model, every oracle selector
+    python benchmarks/bench_selection.py --model output/quickstart --mode cached --compare_dense
     python benchmarks/bench_selection.py --model output/quickstart --mode streaming --ks 3 --methods NAME [NAME ...]
     python benchmarks/bench_selection.py --model output/quickstart --memory_table --ks 3 --methods NAME
     python benchmarks/bench_selection.py --report benchmarks/results/selection_streaming_<date>.json
@@ -12,6 +13,10 @@ farthest-point sampling (2 of the pool, so M = 98 candidates on the built-in sce
 Every selector that calls the oracle runs (or those of --methods), once per combination of the --sweep values of the
 options it declares (default eps = 0.1 0.3 0.6); ratios are taken to the row with the most evaluated oracles at the
 same K (exhaustive greedy when it runs). Peak resident memory of the process is printed at the end.
+Each selector gets the oracle its `oracle_kind` declares (log-det: sparse view factors, `active.logdet`; diagonal:
+the blocks' diagonals). `--compare_dense` also runs every log-det selector on the dense twin (`DenseBlockInformation`
+over [N, P, P] blocks: the implementation before the sparse factors; its blocks are the same float32 factors
+scattered to dense on every call, a few % of a dense gain) and prints both times and whether the picks agree. `benchmarks/selection_cost.py` times old vs new per candidate (Fisher pass, gain, commit, end to end).
 `--memory_table` runs the first of --methods (first K of --ks) in both modes, each in its own process, for a growing number of candidates (--pool_sizes, the last = all) and prints
 the peak resident memory of each: cached grows with M, streaming stays flat.
 """
@@ -31,10 +36,12 @@ from pathlib import Path
 import torch
 
 from active import SelectionContext, build_selector, list_selectors, selector_options
-from active.fisher import fisher_view_blocks
-from active.logdet import BlockGainOracle, BlockInformation
+from active.fisher import (DiagonalGainOracle, FisherViewBlocks, fisher_view_blocks, fisher_view_diagonals,
+                           fisher_view_factors, parameter_columns)
+from active.logdet import BlockGainOracle, BlockInformation, DenseBlockInformation
 from active.schedule import farthest_point_views
 from gaussian_renderer import render
+from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from scene.trained import load_trained
 from utils.losses import photometric_loss
 
@@ -95,6 +102,8 @@ def main() -> None:
                         help="stop after the step / Fisher timing, with the Gram vs projection-Jacobian split")
     parser.add_argument("--raster_backend", choices=("auto", "compiled", "torch"), default=None,
                         help="rasterizer backend (default: the model's cfg_args)")
+    parser.add_argument("--compare_dense", action="store_true",
+                        help="also run the log-det selectors on the dense twin (the pre-sparse implementation)")
     args = parser.parse_args()
     if args.report:
         report(args.report)
@@ -121,50 +130,86 @@ def main() -> None:
     def blocks(v):
         return fisher_view_blocks(gaussians, cams[v], bg, settings)
 
+    def factors(v):
+        return FisherViewBlocks.stored(fisher_view_factors(gaussians, cams[v], bg, settings))
+
+    def diagonals(v):
+        return fisher_view_diagonals(gaussians, cams[v], bg, settings)
+
     sample = candidates[:: max(1, len(candidates) // 6)][:6]
     train_step(sample[0])
     t_step = median_time(train_step, sample)
     t_fisher = median_time(blocks, sample)
+    t_factors = median_time(factors, sample)
     prior = sum(blocks(v) for v in seeds)
     info = BlockInformation(prior)
-    some_blocks = blocks(candidates[0])
-    t_gain = median_time(lambda _: info.gain(some_blocks), range(5))
+    some_factors = factors(candidates[0])
+    t_gain = median_time(lambda _: info.gain(some_factors), range(5))
+    dense_info, some_blocks = DenseBlockInformation(prior), some_factors.dense()
+    t_dense_gain = median_time(lambda _: dense_info.gain(some_blocks), range(3))
     print(f"model {model_path}: {gaussians.num_gaussians} Gaussians, {cams[0].width}x{cams[0].height}, "
           f"M = {len(candidates)} candidates, torch {torch.__version__}, {torch.get_num_threads()} threads")
     print(f"one training step (fwd+bwd+loss): {1e3 * t_step:.1f} ms | one view's Fisher blocks: "
-          f"{1e3 * t_fisher:.1f} ms ({t_fisher / t_step:.2f}x a step) | one gain on cached blocks: "
-          f"{1e3 * t_gain:.1f} ms")
+          f"{1e3 * t_fisher:.1f} ms ({t_fisher / t_step:.2f}x a step), as visible factors {1e3 * t_factors:.1f} ms | "
+          f"one gain on cached factors: {1e3 * t_gain:.2f} ms (dense twin {1e3 * t_dense_gain:.1f} ms, "
+          f"{t_dense_gain / t_gain:.1f}x), {some_factors.indices.numel()} of {gaussians.num_gaussians} Gaussians seen")
     if args.cost_only:
         fisher_split(gaussians, [cams[v] for v in sample], bg, settings)
         return
 
     cache, t_cache, cache_mb = {}, 0.0, 0.0
+    diag_cache = {}
+    kinds = {build_selector(m).oracle_kind for m in args.methods}
     if args.mode == "cached":
         t0 = time.perf_counter()
-        cache = {v: blocks(v) for v in candidates}
+        if "logdet" in kinds:
+            cache = {v: factors(v) for v in candidates}
+        if "diagonal" in kinds:
+            diag_cache = {v: diagonals(v) for v in candidates}
         t_cache = time.perf_counter() - t0
-        cache_mb = sum(b.numel() * b.element_size() for b in cache.values()) / 2**20
-        print(f"cache: {len(cache)} views, {cache_mb:.0f} MB, built in {t_cache:.1f} s")
+        cache_mb = sum(f.nbytes for f in cache.values()) / 2**20
+        print(f"cache: {len(candidates)} views, {cache_mb:.0f} MB of float32 visible factors "
+              f"(dense float64 blocks would be {len(candidates) * prior.numel() * 8 / 2**20:.0f} MB), "
+              f"built in {t_cache:.1f} s")
+    prior_diag = sum(diagonals(v) for v in seeds) if "diagonal" in kinds else None
+    columns = parameter_columns(gaussians, RAW_PARAMETER_GROUPS)
 
     rows = []
     configs = [(method, options) for method in args.methods for options in option_grid(method, args.sweep)]
     for k in args.ks:
         for method, options in configs:
-            computed = set()
+            kind = build_selector(method).oracle_kind
+            variants = ["sparse", "dense"] if args.compare_dense and kind == "logdet" else ["sparse"]
+            for variant in variants:
+                computed = set()
 
-            def provider(v):
-                computed.add(v)
-                return cache[v] if cache else blocks(v)
+                def provider(v, variant=variant, kind=kind):
+                    computed.add(v)
+                    if kind == "diagonal":
+                        return diag_cache[v] if diag_cache else diagonals(v)
+                    if variant == "dense":
+                        return cache[v].dense() if cache else factors(v).dense()  # scattered per call
+                    return cache[v] if cache else factors(v)
 
-            oracle = BlockGainOracle(BlockInformation(prior), provider)
-            ctx = SelectionContext(candidates, oracle, torch.Generator().manual_seed(0), 0)
-            t0 = time.perf_counter()
-            sel = build_selector(method, **options).select(ctx, k)
-            rows.append({"K": k, "method": method, "options": options, "conservative": sel.conservative,
-                         "evaluated": oracle.evaluated, "views_computed": len(computed),
-                         "select_s": time.perf_counter() - t0})
+                if kind == "diagonal":
+                    oracle = DiagonalGainOracle(prior_diag, provider, columns)
+                elif variant == "dense":
+                    oracle = DenseGainOracle(DenseBlockInformation(prior), provider)
+                else:
+                    oracle = BlockGainOracle(BlockInformation(prior), provider)
+                ctx = SelectionContext(candidates, oracle, torch.Generator().manual_seed(0), 0,
+                                       camera_centers=torch.stack([c.camera_center for c in cams]),
+                                       train_ids=tuple(seeds))
+                t0 = time.perf_counter()
+                sel = build_selector(method, **options).select(ctx, k)
+                rows.append({"K": k, "method": method, "options": options, "oracle": variant,
+                             "conservative": sel.conservative, "evaluated": oracle.evaluated,
+                             "views_computed": len(computed), "select_s": time.perf_counter() - t0,
+                             "ids": sel.ids, "gains": sel.gains})
     print(f"\n{args.mode} mode{' (cache build excluded, see above)' if cache else ''}")
     print_rows(rows)
+    if args.compare_dense:
+        compare_dense(rows)
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"\npeak resident memory of this process: {peak_mb:.0f} MB")
     out = args.json or RESULTS_DIR / f"selection_{args.mode}_{time.strftime('%Y%m%d_%H%M%S')}.json"
@@ -172,9 +217,45 @@ def main() -> None:
     out.write_text(json.dumps({"machine": platform.platform(), "torch": torch.__version__, "mode": args.mode,
                                "gaussians": gaussians.num_gaussians, "candidates": len(candidates),
                                "cache_mb": cache_mb, "train_step_s": t_step,
-                               "fisher_view_s": t_fisher, "gain_s": t_gain, "cache_build_s": t_cache,
+                               "fisher_view_s": t_fisher, "fisher_factors_s": t_factors, "gain_s": t_gain,
+                               "dense_gain_s": t_dense_gain, "cache_build_s": t_cache,
                                "peak_rss_mb": peak_mb, "rows": rows}, indent=2))
     print(f"wrote {out}")
+
+
+class DenseGainOracle(BlockGainOracle):
+    """The oracle before the sparse factors, over the dense twin: every gain whitens all N blocks [N, P, P]; a commit
+    reuses the whitened blocks of the best gain since the last commit."""
+
+    def gain(self, view_id: int) -> float:
+        self.evaluated += 1
+        gain, w = self.information.gain_and_whitened(self.view_blocks(view_id))
+        if self._best is None or gain > self._best[1]:
+            self._best = (view_id, gain, w)
+        return gain
+
+    def commit(self, view_id: int) -> None:
+        if self._best is not None and self._best[0] == view_id:
+            self.information.add_whitened(self._best[2])
+        else:
+            self.information.add(self.view_blocks(view_id))
+        self._best = None
+
+
+def compare_dense(rows: list[dict]) -> None:
+    """Per log-det row: selection seconds sparse vs dense twin, their ratio, and whether the picks agree (with the
+    relative gap of the first differing pick's gains when they do not)."""
+    print(f"\n{'K':>2} {'method':8} {'options':>9} {'dense s':>8} {'sparse s':>8} {'ratio':>6}  picks")
+    for dense in (r for r in rows if r["oracle"] == "dense"):
+        sparse = next(r for r in rows if r["oracle"] == "sparse" and r["K"] == dense["K"]
+                      and r["method"] == dense["method"] and r["options"] == dense["options"])
+        same = sparse["ids"] == dense["ids"]
+        note = "same" if same else f"differ: sparse {sparse['ids']} vs dense {dense['ids']}"
+        gap = max(abs(a - b) / max(abs(b), 1e-300) for a, b in zip(sparse["gains"], dense["gains"])) if same else None
+        options = " ".join(f"{n}={v:g}" for n, v in dense["options"].items())
+        print(f"{dense['K']:2d} {dense['method']:8} {options:>9} {dense['select_s']:8.2f} {sparse['select_s']:8.2f} "
+              f"{dense['select_s'] / sparse['select_s']:6.2f}  {note}"
+              + (f" (max relative gain difference {gap:.1e})" if gap is not None else ""))
 
 
 def option_grid(method: str, sweep: list[str]) -> list[dict]:
@@ -192,19 +273,21 @@ def print_rows(rows: list[dict]) -> None:
     (exhaustive greedy when it ran) and the time per evaluated oracle; then the time per evaluated oracle summed
     over all rows of each method (per-view Fisher cost varies, so single cells scatter around the oracle ratio;
     the totals show whether overhead eats the savings)."""
-    print(f"{'K':>2} {'method':8} {'options':>9} {'conserv.':>8} {'evaluated':>9} {'views':>5} {'select s':>9} "
+    print(f"{'K':>2} {'method':8} {'oracle':6} {'options':>9} {'conserv.':>8} {'evaluated':>9} {'views':>5} "
+          f"{'select s':>9} "
           f"{'time/max':>8} {'evals/max':>9} {'s/eval':>7}")
     for r in rows:
-        ref = max((p for p in rows if p["K"] == r["K"]), key=lambda p: p["evaluated"])
+        ref = max((p for p in rows if p["K"] == r["K"] and p.get("oracle") == r.get("oracle")),
+                  key=lambda p: p["evaluated"])
         ratios = f"{r['select_s'] / ref['select_s']:8.3f} {r['evaluated'] / max(1, ref['evaluated']):9.3f}"
         options = " ".join(f"{n}={v:g}" for n, v in r.get("options", {}).items())
-        print(f"{r['K']:2d} {r['method']:8} {options:>9} {r['conservative']:8d} "
+        print(f"{r['K']:2d} {r['method']:8} {r.get('oracle', 'dense'):6} {options:>9} {r['conservative']:8d} "
               f"{r['evaluated']:9d} {r['views_computed']:5d} {r['select_s']:9.2f} {ratios} "
               f"{r['select_s'] / max(1, r['evaluated']):7.3f}")
-    for method in dict.fromkeys(r["method"] for r in rows):
-        mine = [r for r in rows if r["method"] == method]
+    for method, oracle in dict.fromkeys((r["method"], r.get("oracle", "dense")) for r in rows):
+        mine = [r for r in rows if r["method"] == method and r.get("oracle", "dense") == oracle]
         seconds, evals = sum(r["select_s"] for r in mine), sum(r["evaluated"] for r in mine)
-        print(f"{method}: {evals} evaluated oracles in {seconds:.1f} s over {len(mine)} rows = "
+        print(f"{method} ({oracle}): {evals} evaluated oracles in {seconds:.1f} s over {len(mine)} rows = "
               f"{seconds / max(1, evals):.4f} s per evaluated oracle")
 
 

@@ -49,7 +49,7 @@ def is_finished(model_dir: Path, uncertainty: bool = False) -> bool:
     iteration = trained_iteration(model_dir)
     results = read_json(model_dir / RESULTS)
     entry = results.get(method_name(iteration)) if iteration is not None and isinstance(results, dict) else None
-    return isinstance(entry, dict) and (not uncertainty or "AUSE" in entry)
+    return isinstance(entry, dict) and (not uncertainty or "uncertainty_object_region" in entry)
 
 
 def is_rendered(model_dir: Path, iteration: int, uncertainty: bool = False) -> bool:

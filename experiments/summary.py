@@ -139,10 +139,12 @@ def per_step_count(runs: list[Run], kind: str) -> int | None:
 
 def quality_rows(runs: list[Run]) -> list[dict]:
     """Setup x method setting: PSNR / SSIM / LPIPS mean and std over the complete runs (seeds and scenes), and the
-    uncertainty metrics (Spearman, AUSE) when some run has them (render.py --uncertainty)."""
+    uncertainty metrics when some run has them (render.py --uncertainty): Spearman and AUSE_MAE_norm of every map
+    kind over the image and the object (results.json keys "METRIC/KIND/REGION", see metrics.py)."""
     metrics = ("PSNR", "SSIM", "LPIPS")
-    if any(r.results is not None and "AUSE" in r.results for r in runs):
-        metrics += ("Spearman", "AUSE")
+    found = {k for r in runs if r.results is not None for k in r.results if k.count("/") == 2}
+    metrics += tuple(sorted((k for k in found if k.split("/")[0] in ("Spearman", "AUSE_MAE_norm")),
+                            key=lambda k: (k.split("/")[1], k.split("/")[2], k.split("/")[0] != "Spearman")))
     groups: dict[tuple, list[Run]] = defaultdict(list)
     for r in runs:
         groups[(r.setup, r.setting)].append(r)
@@ -225,7 +227,8 @@ def markdown_table(rows: list[dict], digits: dict[str, int]) -> str:
     head = [c[:-5] if c.endswith("_mean") else c for c in cols]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in cols) + "|"]
     for row in rows:
-        lines.append("| " + " | ".join(_cell(row, c, digits.get(c.split("_")[0], 2)) for c in cols) + " |")
+        lines.append("| " + " | ".join(_cell(row, c, digits.get(c.split("/")[0].split("_")[0], 2)) for c in cols)
+                     + " |")
     return "\n".join(lines) + "\n"
 
 

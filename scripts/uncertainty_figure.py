@@ -2,8 +2,9 @@
 
     python scripts/uncertainty_figure.py output/lego --view 3 --out docs/results/uncertainty_lego/view03.png
 
-Reads MODEL/test/ours_N/{gt,renders,uncertainty} (the largest N unless --iteration) and per_view.json's Spearman
-and AUSE for the title when metrics.py has run.
+Reads MODEL/test/ours_N/{gt,renders,uncertainty/KIND} (the largest N unless --iteration; --kind, default
+position_variance) and per_view.json's whole-image Spearman and AUSE_RMSE of that kind for the title when metrics.py
+has run.
 """
 from __future__ import annotations
 
@@ -18,11 +19,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from utils.errors import UserError, run_cli  # noqa: E402
-from utils.metrics_core import method_dirs, read_rgb  # noqa: E402
+from utils.metrics_core import UNCERTAINTY_KINDS, method_dirs, read_rgb, uncertainty_key  # noqa: E402
 from utils.model_dir import PER_VIEW, method_name  # noqa: E402
 
 
-def make_figure(model: Path, view: int, out: Path, iteration: int | None = None) -> Path:
+def make_figure(model: Path, view: int, out: Path, iteration: int | None = None,
+                kind: str = "position_variance") -> Path:
     """Write the four-panel PNG of test view `view` to `out`; returns `out`."""
     dirs = method_dirs(model)
     if iteration is not None:
@@ -31,12 +33,14 @@ def make_figure(model: Path, view: int, out: Path, iteration: int | None = None)
         raise UserError(f"{model}: no test/ours_N renders{'' if iteration is None else f' for {iteration}'}; "
                         "run render.py --uncertainty first")
     method_dir, name = dirs[-1], f"{view:05d}"
-    if not (method_dir / "uncertainty" / f"{name}.npy").is_file():
-        raise UserError(f"{method_dir}: no uncertainty/{name}.npy; run render.py -m {model} --uncertainty")
+    if kind not in UNCERTAINTY_KINDS:
+        raise UserError(f"unknown uncertainty kind {kind!r}; valid: {', '.join(UNCERTAINTY_KINDS)}")
+    if not (method_dir / "uncertainty" / kind / f"{name}.npy").is_file():
+        raise UserError(f"{method_dir}: no uncertainty/{kind}/{name}.npy; run render.py -m {model} --uncertainty")
     gt = read_rgb(method_dir / "gt" / f"{name}.png").permute(1, 2, 0).numpy()  # [H, W, 3]
     image = read_rgb(method_dir / "renders" / f"{name}.png").permute(1, 2, 0).numpy()
     error = np.abs(image - gt).mean(-1)  # [H, W]
-    uncertainty = np.load(method_dir / "uncertainty" / f"{name}.npy")  # [H, W]
+    uncertainty = np.load(method_dir / "uncertainty" / kind / f"{name}.npy")  # [H, W]
     positive = uncertainty[uncertainty > 0]
     lo = positive.min() if positive.size else 1e-12
     fig, axes = plt.subplots(1, 4, figsize=(12, 3.4), dpi=110)
@@ -47,17 +51,18 @@ def make_figure(model: Path, view: int, out: Path, iteration: int | None = None)
                          norm=matplotlib.colors.LogNorm(vmin=lo, vmax=max(uncertainty.max(), lo * 10)))
     fig.colorbar(err, ax=axes[2], fraction=0.046, pad=0.02)
     fig.colorbar(unc, ax=axes[3], fraction=0.046, pad=0.02)
-    titles = ["test view (ground truth)", "render", "|error| (mean RGB)", "uncertainty (positional var.)"]
+    titles = ["test view (ground truth)", "render", "|error| (mean RGB)", f"uncertainty ({kind})"]
     for ax, title in zip(axes, titles):
         ax.set_title(title, fontsize=9)
         ax.axis("off")
     per_view = model / PER_VIEW
     if per_view.is_file():
         scores = json.loads(per_view.read_text()).get(method_dir.name, {})
-        if "Spearman" in scores:
-            fig.suptitle(f"{model.name} {method_dir.name} view {view}: Spearman "
-                         f"{scores['Spearman'][name + '.png']:.3f}, AUSE {scores['AUSE'][name + '.png']:.4f}",
-                         fontsize=10)
+        rho, area = (scores.get(uncertainty_key(m, kind, "image"), {}).get(name + ".png")
+                     for m in ("Spearman", "AUSE_RMSE"))
+        if rho is not None and area is not None:
+            fig.suptitle(f"{model.name} {method_dir.name} view {view}: {kind}, image Spearman {rho:.3f}, "
+                         f"AUSE_RMSE {area:.4f}", fontsize=10)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
     fig.savefig(out)
@@ -70,9 +75,11 @@ def main() -> None:
     parser.add_argument("model", type=Path, help="model directory rendered with render.py --uncertainty")
     parser.add_argument("--view", type=int, default=0, help="test view index (default 0)")
     parser.add_argument("--iteration", type=int, default=None, help="ours_N to use (default: the largest N)")
+    parser.add_argument("--kind", default="position_variance",
+                        help=f"uncertainty map kind: {', '.join(UNCERTAINTY_KINDS)} (default position_variance)")
     parser.add_argument("--out", type=Path, required=True, help="output PNG")
     args = parser.parse_args()
-    print(make_figure(args.model, args.view, args.out, args.iteration))
+    print(make_figure(args.model, args.view, args.out, args.iteration, args.kind))
 
 
 if __name__ == "__main__":

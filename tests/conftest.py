@@ -83,3 +83,19 @@ def run_cli(*args: str, cwd: Path = ROOT, timeout: int = 240) -> subprocess.Comp
     """Run one of the project's CLIs with the test interpreter; returns the completed process."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     return subprocess.run([sys.executable, *args], cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env)
+
+
+@pytest.fixture(scope="session")
+def active_model(tiny_scene, tmp_path_factory) -> Path:
+    """A finished pop_gs run on the tiny scene (2 seed views, 2 stages, 8 views), rendered with uncertainty maps
+    and evaluated (metrics.py --report also writes its report.html): a model directory with everything a run report
+    reads (made once per session)."""
+    model = tmp_path_factory.mktemp("active") / "model"
+    for args in (("train.py", "-s", str(tiny_scene), "-m", str(model), "--method", "pop_gs", "--eval",
+                  "--num_init_views", "2", "--views_per_step", "3", "--max_views", "8", "--iters_per_view", "4",
+                  "--iterations", "70", "--num_random_points", "600", "--quiet", "--sh_degree", "1"),
+                 ("render.py", "-m", str(model), "--quiet", "--uncertainty"),
+                 ("metrics.py", "-m", str(model), "--quiet", "--report")):
+        r = run_cli(*args)
+        assert r.returncode == 0, r.stderr
+    return model

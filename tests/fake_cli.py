@@ -66,13 +66,14 @@ elif Path(args[0]).name == "render.py":
     rendered = model / "test" / "ours_{{}}".format(status["iteration"])
     (rendered / "renders").mkdir(parents=True, exist_ok=True)
     if "--uncertainty" in args:
-        (rendered / "uncertainty").mkdir()
+        (rendered / "uncertainty" / "fisherrf").mkdir(parents=True)
 elif Path(args[0]).name == "metrics.py":
     status = json.loads((model / "run_status.json").read_text())
     rendered = model / "test" / "ours_{{}}".format(status["iteration"])
     entry = {{"PSNR": 20.0 + int(model.name[4:]), "SSIM": 0.8, "LPIPS": None}}
     if (rendered / "uncertainty").is_dir():
-        entry.update(Spearman=0.5, AUSE=0.01 * (1 + int(model.name[4:])))
+        entry.update({{"Spearman/fisherrf/object": 0.5, "AUSE_MAE_norm/fisherrf/object": 0.01 * (1 + int(model.name[4:])),
+                      "uncertainty_object_region": "pixels"}})
     (model / "results.json").write_text(json.dumps({{"ours_{{}}".format(status["iteration"]): entry}}))
 '''
 

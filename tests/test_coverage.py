@@ -94,7 +94,8 @@ def test_train_py_gives_the_selectors_the_camera_geometry(tiny_scene, tmp_path):
     assert r.returncode == 0, r.stderr
     selection = json.loads((tmp_path / "f" / "selection.json").read_text())
     assert selection["config"]["selector_options"] == {"fisherrf_lambda": 1e-6, "fisherrf_params":
-                                                       "means,log_scales,logit_opacities,sh_dc,sh_rest"}
+                                                       "means,log_scales,logit_opacities,sh_dc,sh_rest",
+                                                       "fisherrf_variant": "exact"}
     for stage in selection["stages"]:
         m = stage["candidates"]
         assert stage["oracle_calls"]["conservative"] == stage["oracle_calls"]["evaluated"] == m + (m - 1)

@@ -224,7 +224,7 @@ def test_uncertainty_rerun_adds_the_maps_to_finished_runs(tmp_path):
     renders = calls(log, "render.py")
     assert len(renders) == 2 and all("--uncertainty" in c for c in renders) and len(calls(log, "metrics.py")) == 2
     summary = (out / "setup1" / "summary.md").read_text()
-    assert "| Spearman | AUSE | LPIPS_variant |" in summary, summary
+    assert "| Spearman/fisherrf/object | AUSE_MAE_norm/fisherrf/object | LPIPS_variant |" in summary, summary
     assert "| 0.500 ± 0.000 | 0.0150 ± 0.0071 |" in summary, summary
     log.unlink()
     r = grid(*args, "--uncertainty", env=env)  # now finished with the maps: nothing runs

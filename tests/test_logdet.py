@@ -1,11 +1,13 @@
 """Block log-det information: gains against dense torch.logdet, whitened == direct form, the ridge, robustness on
-nearly singular blocks, errors, oracle counting."""
+nearly singular blocks, errors, oracle counting; the sparse factor path (numba kernels and their torch twin) against
+the dense twin `DenseBlockInformation`."""
 import math
 
 import pytest
 import torch
 
-from active.logdet import BlockGainOracle, BlockInformation, logdet_identity_plus
+from active.logdet import (BlockGainOracle, BlockInformation, DenseBlockInformation, ViewFactors,
+                           logdet_identity_plus)
 from utils.errors import UserError
 
 
@@ -39,9 +41,13 @@ def clamped_gain_reference(a_blocks, h_blocks):
     return float(torch.log1p(torch.linalg.eigvalsh(w).clamp_min(0)).sum())
 
 
-def test_gains_equal_dense_logdet_through_commits():
+BACKENDS = ("compiled", "torch")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_gains_equal_dense_logdet_through_commits(backend):
     prior, *views = random_blocks(6, 4, 3, seed=1)
-    info = BlockInformation(prior, delta_rel=1e-3, delta_abs=1e-6)
+    info = BlockInformation(prior, delta_rel=1e-3, delta_abs=1e-6, backend=backend)
     a = dense(info.matrix)  # [12, 12]
     h0_logdet = float(torch.logdet(a))
     accepted = []
@@ -59,14 +65,15 @@ def test_gains_equal_dense_logdet_through_commits():
     assert math.isclose(info.rho(), sum(accepted), rel_tol=1e-10)
 
 
-def test_whitened_equals_direct_form_on_ill_conditioned_blocks():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_whitened_equals_direct_form_on_ill_conditioned_blocks(backend):
     # Prior eigenvalues spread over 1e-4..1e4 (ratio 1e8) per block, views of similar spread.
     g = torch.Generator().manual_seed(5)
     q, _ = torch.linalg.qr(torch.randn(8, 5, 5, generator=g, dtype=torch.float64))
     spread = torch.logspace(-4, 4, 5, dtype=torch.float64)
     prior = q @ torch.diag_embed(spread) @ q.transpose(-1, -2)
     view = random_blocks(1, 8, 5, seed=6)[0] * 1e2
-    info = BlockInformation(prior, delta_rel=0.0, delta_abs=1e-12)
+    info = BlockInformation(prior, delta_rel=0.0, delta_abs=1e-12, backend=backend)
     a = info.matrix
     direct = float((torch.logdet(a + view) - torch.logdet(a)).sum())
     # Direct form loses ~cond * eps = 1e8 * 1e-16 relative accuracy; 1e-7 leaves room for that.
@@ -98,7 +105,8 @@ def test_identity_plus_clamps_negative_eigenvalues():
     assert bool((terms >= 0).all()) and abs(float(terms[3])) < 1e-15
 
 
-def test_nearly_singular_blocks_give_finite_nonnegative_gains():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_nearly_singular_blocks_give_finite_nonnegative_gains(backend):
     # Rank-deficient float32-accumulated blocks (J^T J with J of rank 2 in float32), as the Fisher oracle makes:
     # exact null directions plus negative eigenvalues ~ eps32 * |H|.
     g = torch.Generator().manual_seed(2)
@@ -108,17 +116,19 @@ def test_nearly_singular_blocks_give_finite_nonnegative_gains():
     prior = blocks32[0]
     zero = torch.zeros_like(prior)
     for p in (prior, zero):
-        info = BlockInformation(p)
+        info = BlockInformation(p, backend=backend)
+        # Eigenvalues of W are known to ~eps64 * |W| absolutely (|W| ~ 1e14 over the zero prior): a log1p of the
+        # small ones moves by up to that much, over N * P = 60 of them. The sparse path takes the PSD part of H
+        # before whitening, the reference after: for noise eigenvalues the two differ by that much, no more.
+        noise = 60 * 2.2e-16 * float(torch.linalg.matrix_norm(DenseBlockInformation(p).whiten(blocks32[1]),
+                                                               ord=2).max())
         for view in (blocks32[1], -blocks32[2] * 1e-9, zero):  # a PSD-ish view, a tiny negative view, no view
             gain = info.gain(view)
             assert math.isfinite(gain) and gain >= 0
-            assert math.isclose(gain, clamped_gain_reference(info.matrix, view), rel_tol=1e-6, abs_tol=1e-9)
-            # ^ eigen-sqrt twin on matrices of condition up to 1/delta_rel = 1e6: ~1e-10 relative; abs for gain 0
+            assert math.isclose(gain, clamped_gain_reference(info.matrix, view), rel_tol=1e-6, abs_tol=noise)
+            # ^ eigen-sqrt twin on matrices of condition up to 1/delta_rel = 1e6: ~1e-10 relative
         assert info.gain(zero) == 0.0
         gain = info.gain(blocks32[1])
-        # Eigenvalues of W are known to ~eps64 * |W| absolutely (|W| ~ 1e14 over the zero prior): a log1p of the
-        # small ones moves by up to that much, over N * P = 60 of them.
-        noise = 60 * 2.2e-16 * float(torch.linalg.matrix_norm(info.whiten(blocks32[1]), ord=2).max())
         info.add(blocks32[1])  # committing a non-PSD view never fails, and adds exactly the measured gain
         assert abs(info.rho() - gain) <= 1e-9 * gain + noise
 
@@ -164,3 +174,76 @@ def test_oracle_counts_gains_not_commits_and_streams_blocks():
     assert oracle.gain(1) < expected  # the committed information is used: diminishing returns
     oracle.reset_counts()
     assert oracle.evaluated == 0
+
+
+def partly_visible(blocks, seen, seed):
+    """Zero the blocks of the Gaussians a view does not see (a random `seen` fraction kept). [N, P, P]"""
+    g = torch.Generator().manual_seed(seed)
+    return blocks * (torch.rand(blocks.shape[0], generator=g) < seen).double()[:, None, None]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_sparse_gains_and_commits_equal_dense_twin(backend):
+    # 40 Gaussians, P = 14, view blocks seen by ~30 % of the Gaussians, a prior with all-zero blocks too. (Full-rank
+    # views: over a zero prior block the ridge is 1e-8, and a rank-deficient dense block's roundoff in its null
+    # directions, eps |H| / 1e-8, would set the agreement, not the method; the test below covers that case.)
+    prior = partly_visible(random_blocks(1, 40, 14, seed=11)[0], 0.7, seed=0)
+    views = [partly_visible(random_blocks(1, 40, 14, seed=20 + i)[0], 0.3, seed=i + 1) for i in range(5)]
+    sparse, dense_twin = BlockInformation(prior, backend=backend), DenseBlockInformation(prior)
+    a = dense(dense_twin.matrix)  # [560, 560]
+    for pick in (3, 0, 4):
+        for v in views:
+            expected = float(torch.logdet(a + dense(v)) - torch.logdet(a))
+            assert math.isclose(sparse.gain(v), dense_twin.gain(v), rel_tol=1e-9)
+            assert math.isclose(sparse.gain(v), expected, rel_tol=1e-9)
+        sparse.add(views[pick])
+        dense_twin.add(views[pick])
+        a = a + dense(views[pick])
+        torch.testing.assert_close(sparse.chol, dense_twin.chol, rtol=1e-10, atol=1e-10 * float(a.abs().max()))
+        torch.testing.assert_close(sparse.matrix, dense_twin.matrix, rtol=1e-10, atol=1e-9 * float(a.abs().max()))
+        assert math.isclose(sparse.rho(), dense_twin.rho(), rel_tol=1e-9)
+    # Blocks the committed views do not see are untouched, bit for bit.
+    unseen = (torch.stack([views[i] for i in (3, 0, 4)]).abs().flatten(2).amax(-1) == 0).all(0)  # [N]
+    assert bool(unseen.any())
+    assert torch.equal(sparse.chol[unseen], BlockInformation(prior, backend=backend).chol[unseen])
+
+
+def test_compiled_kernels_equal_torch_twin_per_block():
+    prior = random_blocks(1, 300, 14, seed=31)[0]
+    g = torch.Generator().manual_seed(32)
+    indices = torch.sort(torch.randperm(300, generator=g)[:120]).values
+    view = ViewFactors(indices, torch.randn(120, 14, 9, generator=g, dtype=torch.float64) * 3.0, 300)
+    compiled, twin = BlockInformation(prior, backend="compiled"), BlockInformation(prior, backend="torch")
+    for stored in (view, view.stored_as(torch.float32)):
+        torch.testing.assert_close(compiled.gain_terms(stored), twin.gain_terms(stored), rtol=1e-10, atol=0)
+        # ^ the same float64 arithmetic in another order; 14 x 14 priors of condition up to ~1e5: ~1e-12 seen
+    added = compiled.add(view), twin.add(view)
+    for info, growth in zip((compiled, twin), added):  # a commit's terms are the log-det growth, == the gain
+        assert math.isclose(growth, info.rho(), rel_tol=1e-10)
+    assert math.isclose(added[0], float(BlockInformation(prior).gain(view)), rel_tol=1e-10)
+    torch.testing.assert_close(compiled.chol, twin.chol, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(compiled.matrix, twin.matrix, rtol=1e-12, atol=1e-10)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_view_that_sees_no_gaussian_gains_zero(backend):
+    prior = random_blocks(1, 5, 4, seed=41)[0]
+    info = BlockInformation(prior, backend=backend)
+    chol = info.chol.clone()
+    empty = ViewFactors(torch.zeros(0, dtype=torch.long), torch.zeros(0, 4, 9, dtype=torch.float64), 5)
+    assert info.gain(empty) == 0.0 and info.gain(torch.zeros(5, 4, 4, dtype=torch.float64)) == 0.0
+    info.add(empty)
+    info.add(torch.zeros(5, 4, 4))
+    assert torch.equal(info.chol, chol) and info.rho() == 0.0
+
+
+def test_view_factors_refuse_non_finite_and_scatter_to_dense():
+    factors = torch.ones(2, 3, 2, dtype=torch.float64)
+    factors[1, 2, 0] = float("inf")
+    with pytest.raises(UserError, match="view Fisher blocks of 7 Gaussians contain NaN or inf"):
+        ViewFactors(torch.tensor([1, 4]), factors, 7)
+    view = ViewFactors(torch.tensor([1, 4]), torch.ones(2, 3, 2, dtype=torch.float64), 7)
+    expected = torch.zeros(7, 3, 3, dtype=torch.float64)
+    expected[[1, 4]] = 2.0  # R R^T of an all-ones 3 x 2 factor
+    assert torch.equal(view.dense(), expected)
+    assert view.stored_as(torch.float32).nbytes == 2 * 8 + 2 * 3 * 2 * 4

@@ -8,10 +8,12 @@ import pytest
 import torch
 
 from active.logdet import BlockInformation
-from active.uncertainty import gaussian_uncertainty, recorded_train_views, uncertainty_map
+from active.uncertainty import (camera_depths, fisherrf_information, fisherrf_map, gaussian_uncertainty,
+                                parse_uncertainty_kinds, recorded_train_views, uncertainty_map, view_information)
 from gaussian_renderer import render
 from tests.conftest import run_cli
 from tests.test_fisher_oracle import BG, bruteforce_blocks, cameras, settings, tiny_model
+from tests.test_fisherrf import bruteforce_diagonals, bruteforce_reference_diagonals
 from utils.errors import UserError
 from utils.uncertainty_metrics import ause, average_ranks, spearman
 
@@ -64,6 +66,36 @@ def test_uncertainty_map_composites_like_a_colour(backend):
                                rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_fisherrf_information_and_maps_follow_fisherrfs_recipe(backend):
+    raster = settings(backend)
+    model, cams = tiny_model(seed=4), cameras()
+    expected = sum(bruteforce_diagonals(model, cams[v])[:, 11:].sum(1) for v in (0, 2, 5))  # sh_dc + sh_rest columns
+    info = fisherrf_information(model, cams, [0, 2, 5], BG, raster)
+    torch.testing.assert_close(info, expected, rtol=1e-4, atol=1e-6 * float(expected.max()))
+    cam = cams[1]
+    view = camera_depths(model, cam)
+    manual = (model.means.detach() @ cam.viewmat[:3, :3].T + cam.viewmat[:3, 3])[:, 2]
+    torch.testing.assert_close(view, manual)
+    drawn = uncertainty_map(cam, model, info * view.clamp_min(0), raster)
+    m = fisherrf_map(cam, model, info, raster)
+    empty = drawn == 0
+    assert empty.any() and (~empty).any()
+    torch.testing.assert_close(m[~empty], drawn[~empty])
+    assert bool((m[empty] == drawn.max()).all())  # nothing drawn: as uncertain as the most uncertain pixel
+    own = view_information(model, cam, BG, raster)
+    torch.testing.assert_close(own, bruteforce_reference_diagonals(model, cam).sum(1), rtol=1e-4,
+                               atol=1e-6 * float(own.max()))
+
+
+def test_unknown_uncertainty_kind_is_one_line_listing_the_valid():
+    assert parse_uncertainty_kinds("fisherrf, position_variance") == ("fisherrf", "position_variance")
+    for text in ("fisherrf,variance", "", "fisherrf,fisherrf"):
+        with pytest.raises(UserError, match="position_variance, fisherrf, fisherrf_view") as err:
+            parse_uncertainty_kinds(text)
+        assert "\n" not in str(err.value)
+
+
 def test_recorded_train_views(tmp_path):
     assert recorded_train_views(tmp_path, 500, 4, "") == [0, 1, 2, 3]
     with pytest.raises(UserError, match="no training views recorded"):
@@ -89,18 +121,31 @@ def test_render_uncertainty_then_metrics(tiny_scene, tmp_path):
     r = run_cli("render.py", "-m", str(model), "--skip_train", "--uncertainty", "--quiet")
     assert r.returncode == 0, r.stderr
     out = model / "test" / "ours_30" / "uncertainty"
-    assert sorted(p.name for p in out.iterdir()) == ["00000.npy", "00000.png", "00001.npy", "00001.png",
-                                                     "00002.npy", "00002.png", "00003.npy", "00003.png",
-                                                     "colorbar.png"]
-    values = np.load(out / "00000.npy")
-    assert values.dtype == np.float32 and values.shape == (32, 32) and values.max() > 0
+    assert sorted(p.name for p in out.iterdir()) == ["fisherrf", "fisherrf_view", "object_mask", "position_variance"]
+    for kind in ("fisherrf", "fisherrf_view", "position_variance"):
+        assert sorted(p.name for p in (out / kind).iterdir()) == [
+            "00000.npy", "00000.png", "00001.npy", "00001.png", "00002.npy", "00002.png", "00003.npy", "00003.png",
+            "colorbar.png"]
+        values = np.load(out / kind / "00000.npy")
+        assert values.dtype == np.float32 and values.shape == (32, 32) and values.max() > 0
     r = run_cli("metrics.py", "-m", str(model), "--quiet")
     assert r.returncode == 0, r.stderr
     results = json.loads((model / "results.json").read_text())["ours_30"]
     per_view = json.loads((model / "per_view.json").read_text())["ours_30"]
-    assert -1 <= results["Spearman"] <= 1 and results["AUSE"] >= 0
-    assert results["AUSE"] == pytest.approx(sum(per_view["AUSE"].values()) / 4)
-    assert "Spearman" in r.stdout
-    r = run_cli("scripts/uncertainty_figure.py", str(model), "--view", "2", "--out", str(tmp_path / "fig.png"))
+    assert results["uncertainty_object_region"].startswith("pixels where the ground truth or the render")
+    for kind in ("fisherrf", "fisherrf_view", "position_variance"):
+        for region in ("image", "object"):
+            key = f"Spearman/{kind}/{region}"
+            assert results[key] is None or -1 <= results[key] <= 1
+            for variant in ("AUSE_RMSE", "AUSE_MAE", "AUSE_RMSE_norm", "AUSE_MAE_norm"):
+                key = f"{variant}/{kind}/{region}"
+                assert results[key] == pytest.approx(sum(per_view[key].values()) / 4)
+    assert "fisherrf_view" in r.stdout and "AUSE_MAE_norm" in r.stdout
+    r = run_cli("metrics.py", "-m", str(model), "--quiet", "--ause", "mae,auc")
+    assert r.returncode != 0 and r.stderr.strip().splitlines()[-1].startswith("error: unknown AUSE variant auc")
+    r = run_cli("render.py", "-m", str(model), "--skip_train", "--uncertainty", "--uncertainty_kind", "depth")
+    assert r.returncode != 0 and "valid" not in r.stdout and "fisherrf_view" in r.stderr.strip().splitlines()[-1]
+    r = run_cli("scripts/uncertainty_figure.py", str(model), "--view", "2", "--kind", "fisherrf", "--out",
+                str(tmp_path / "fig.png"))
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "fig.png").stat().st_size > 0

@@ -7,8 +7,6 @@ import tempfile
 from pathlib import Path
 from typing import Any, Callable
 
-import torch
-
 
 def atomic_write(path: str | os.PathLike, write: Callable[[str], None]) -> None:
     """Call `write(tmp_path)` on a temporary file next to `path`, then rename it over `path`."""
@@ -36,4 +34,6 @@ def write_json(path: str | os.PathLike, data: Any) -> None:
 
 def save_torch(path: str | os.PathLike, obj: Any) -> None:
     """`torch.save` atomically."""
+    import torch  # here, so that JSON writers (report.py) do not pay for importing torch
+
     atomic_write(path, lambda tmp: torch.save(obj, tmp))

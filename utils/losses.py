@@ -65,6 +65,11 @@ def ssim(img1: torch.Tensor, img2: torch.Tensor) -> torch.Tensor:
     Returns:
         Scalar tensor: the mean of the SSIM map over batch, channels and pixels.
     """
+    return ssim_map(img1, img2).mean()
+
+
+def ssim_map(img1: torch.Tensor, img2: torch.Tensor) -> torch.Tensor:
+    """The per-pixel SSIM map behind `ssim` (zero padding at the border). [C, H, W] or [B, C, H, W] -> [B, C, H, W]"""
     assert img1.shape == img2.shape, f"shapes differ: {tuple(img1.shape)} vs {tuple(img2.shape)}"
     assert img1.dim() in (3, 4), f"expected [C, H, W] or [B, C, H, W], got {tuple(img1.shape)}"
     if img1.dim() == 3:
@@ -75,9 +80,8 @@ def ssim(img1: torch.Tensor, img2: torch.Tensor) -> torch.Tensor:
     mu1, mu2, e11, e22, e12 = moments.split(img1.shape[1], dim=1)
     mu1_sq, mu2_sq, mu12 = mu1 * mu1, mu2 * mu2, mu1 * mu2
     sigma1_sq, sigma2_sq, sigma12 = e11 - mu1_sq, e22 - mu2_sq, e12 - mu12
-    ssim_map = ((2 * mu12 + SSIM_C1) * (2 * sigma12 + SSIM_C2)) / (
+    return ((2 * mu12 + SSIM_C1) * (2 * sigma12 + SSIM_C2)) / (
         (mu1_sq + mu2_sq + SSIM_C1) * (sigma1_sq + sigma2_sq + SSIM_C2))
-    return ssim_map.mean()
 
 
 LAMBDA_DSSIM = 0.2  # the 3DGS training loss: (1 - 0.2) L1 + 0.2 D-SSIM (the default of train.py --lambda_dssim)

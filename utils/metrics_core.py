@@ -18,11 +18,25 @@ from utils.errors import UserError
 from utils.image import load_rgba
 from utils.losses import psnr, ssim
 from utils.lpips_loader import LPIPS_MIN_SIDE, lpips_distance
+from active.uncertainty import UNCERTAINTY_KINDS  # render.py --uncertainty_kind: one folder per kind
 from utils.model_dir import METHOD_PATTERN
-from utils.uncertainty_metrics import ause, spearman
+from utils.uncertainty_metrics import AUSE_VARIANTS, ause, spearman
 
 log = logging.getLogger(__name__)
 
+REGIONS = ("image", "object")
+NO_ALPHA = "whole image (the scene has no alpha; object = image)"
+WITH_ALPHA = "pixels where the ground truth or the render differs from the background"
+
+
+def uncertainty_key(metric: str, kind: str, region: str) -> str:
+    """The results.json / per_view.json key of one uncertainty number, e.g. "AUSE_MAE_norm/fisherrf/object"."""
+    return f"{metric}/{kind}/{region}"
+
+
+def uncertainty_metric_names(variants: tuple[str, ...] = tuple(AUSE_VARIANTS)) -> list[str]:
+    """Spearman and the AUSE variants' names: "AUSE_RMSE", "AUSE_MAE_norm", ..."""
+    return ["Spearman"] + ["AUSE_" + v.upper().replace("_NORM", "_norm") for v in variants]
 LOOKED_FOR = "test/ours_N/renders/*.png"
 
 
@@ -80,12 +94,18 @@ class Lpips:
     variant: str
 
 
+def uncertainty_kinds(method_dir: Path) -> list[str]:
+    """The map kinds render.py --uncertainty wrote under `method_dir/uncertainty/`, in UNCERTAINTY_KINDS order."""
+    return [k for k in UNCERTAINTY_KINDS if any((method_dir / "uncertainty" / k).glob("*.npy"))]
+
+
 @torch.no_grad()
 def evaluate_views(method_dir: Path, lpips: Lpips | None, device: str | torch.device = "cpu",
-                   quiet: bool = False) -> dict[str, dict[str, float | None]]:
-    """Per-view metrics of one `test/ours_N` directory: {"SSIM": {name: v}, "PSNR": {...}, "LPIPS": {...}}, plus
-    "Spearman" and "AUSE" (uncertainty vs per-pixel error, `uncertainty_scores`) when render.py --uncertainty wrote
-    `uncertainty/*.npy`.
+                   quiet: bool = False, ause_variants: tuple[str, ...] = tuple(AUSE_VARIANTS)
+                   ) -> dict[str, dict[str, float | None]]:
+    """Per-view metrics of one `test/ours_N` directory: {"SSIM": {name: v}, "PSNR": {...}, "LPIPS": {...}}, plus,
+    for each map kind render.py --uncertainty wrote (`uncertainty/KIND/*.npy`), Spearman and the `ause_variants`
+    over the image and over the object (`uncertainty_scores`), keyed `uncertainty_key(metric, kind, region)`.
 
     LPIPS values are None without a network, or for images smaller than its backbone accepts (logged once).
 
@@ -94,9 +114,7 @@ def evaluate_views(method_dir: Path, lpips: Lpips | None, device: str | torch.de
             or of another size.
     """
     per_view: dict[str, dict[str, float | None]] = {"SSIM": {}, "PSNR": {}, "LPIPS": {}}
-    with_uncertainty = (method_dir / "uncertainty").is_dir()
-    if with_uncertainty:
-        per_view.update({"Spearman": {}, "AUSE": {}})
+    kinds = uncertainty_kinds(method_dir)
     too_small = False
     names = view_names(method_dir)
     label = f"{method_dir.parent.parent.name}/{method_dir.name}"
@@ -111,36 +129,63 @@ def evaluate_views(method_dir: Path, lpips: Lpips | None, device: str | torch.de
         distance = lpips_distance(lpips.model, lpips.variant, render, gt) if lpips is not None else None
         too_small |= lpips is not None and distance is None
         per_view["LPIPS"][name] = None if distance is None else distance.item()
-        if with_uncertainty:
-            per_view["Spearman"][name], per_view["AUSE"][name] = uncertainty_scores(method_dir, name, render, gt)
+        for kind in kinds:
+            for key, value in uncertainty_scores(method_dir, kind, name, render, gt, ause_variants).items():
+                per_view.setdefault(key, {})[name] = value
     if too_small:
         log.warning("%s: LPIPS null for images under %d px (the smallest side LPIPS-%s accepts)", label,
                     LPIPS_MIN_SIDE[lpips.variant], lpips.variant)
     return per_view
 
 
-def uncertainty_scores(method_dir: Path, name: str, render: torch.Tensor,
-                       gt: torch.Tensor) -> tuple[float | None, float]:
-    """(Spearman, AUSE) of `uncertainty/<stem>.npy` against the per-pixel absolute error, averaged over RGB.
+def object_region(method_dir: Path) -> str:
+    """How the "object" region of `method_dir`'s uncertainty metrics is defined (WITH_ALPHA or NO_ALPHA)."""
+    return WITH_ALPHA if (method_dir / "uncertainty" / "object_mask").is_dir() else NO_ALPHA
+
+
+def uncertainty_scores(method_dir: Path, kind: str, name: str, render: torch.Tensor, gt: torch.Tensor,
+                       ause_variants: tuple[str, ...] = tuple(AUSE_VARIANTS)) -> dict[str, float | None]:
+    """Spearman and the AUSE variants of `uncertainty/KIND/<stem>.npy` against the per-pixel absolute error
+    (averaged over RGB), over the image and over the object (`uncertainty/object_mask/<name>`; the whole image when
+    the scene has no alpha and render.py wrote no mask). {uncertainty_key(metric, kind, region): value}
 
     Raises:
-        UserError: the map is missing or not the size of the image.
+        UserError: the map or the mask is missing or not the size of the image.
     """
-    path = method_dir / "uncertainty" / (Path(name).stem + ".npy")
+    path = method_dir / "uncertainty" / kind / (Path(name).stem + ".npy")
     if not path.is_file():
-        raise UserError(f"{method_dir}: uncertainty/ has no {path.name}; rerun render.py --uncertainty for this model")
+        raise UserError(f"{method_dir}: uncertainty/{kind}/ has no {path.name}; rerun render.py --uncertainty for "
+                        "this model")
     values = np.load(path)  # [H, W]
     errors = (render - gt).abs().mean(0).cpu().numpy()  # [H, W]
     if values.shape != errors.shape:
-        raise UserError(f"{method_dir}: uncertainty/{path.name} is {values.shape[1]}x{values.shape[0]} but "
+        raise UserError(f"{method_dir}: uncertainty/{kind}/{path.name} is {values.shape[1]}x{values.shape[0]} but "
                         f"renders/{name} is {errors.shape[1]}x{errors.shape[0]}; rerun render.py --uncertainty")
-    return spearman(values, errors), ause(values, errors)
+    mask_path = method_dir / "uncertainty" / "object_mask" / name
+    if object_region(method_dir) == WITH_ALPHA:
+        if not mask_path.is_file():
+            raise UserError(f"{method_dir}: uncertainty/object_mask/ has no {name}; rerun render.py --uncertainty")
+        mask = read_rgb(mask_path)[0].numpy() > 0.5  # [H, W]
+        if mask.shape != errors.shape:
+            raise UserError(f"{method_dir}: uncertainty/object_mask/{name} is not the size of renders/{name}; rerun "
+                            "render.py --uncertainty")
+    else:
+        mask = np.ones(errors.shape, dtype=bool)
+    out: dict[str, float | None] = {}
+    for region, keep in (("image", np.ones(errors.shape, dtype=bool)), ("object", mask)):
+        u, e = values[keep], errors[keep]
+        names = uncertainty_metric_names(ause_variants)
+        scores = [spearman(u, e) if e.size else None]
+        scores += [ause(u, e, variant=v) if e.size else None for v in ause_variants]
+        out.update({uncertainty_key(m, kind, region): s for m, s in zip(names, scores)})
+    return out
 
 
-def mean_metrics(per_view: dict[str, dict[str, float | None]], lpips_variant: str | None) -> dict:
-    """One `results.json` entry: {"SSIM", "PSNR", "LPIPS", "LPIPS_variant"}, plus "Spearman" and "AUSE" when the
-    views have uncertainty maps; LPIPS (and its variant) is None unless every view has a value, and so is Spearman
-    unless every view's is defined."""
+def mean_metrics(per_view: dict[str, dict[str, float | None]], lpips_variant: str | None,
+                 object_region_text: str | None = None) -> dict:
+    """One `results.json` entry: {"SSIM", "PSNR", "LPIPS", "LPIPS_variant"}, plus the mean of every uncertainty key
+    (and "uncertainty_object_region", `object_region_text`) when the views have uncertainty maps; LPIPS (and its
+    variant) is None unless every view has a value, and so is an uncertainty mean unless every view's is defined."""
     def mean(values: dict[str, float | None]) -> float | None:
         vals = list(values.values())
         return math.fsum(vals) / len(vals) if vals and None not in vals else None
@@ -148,6 +193,8 @@ def mean_metrics(per_view: dict[str, dict[str, float | None]], lpips_variant: st
     lpips_mean = mean(per_view["LPIPS"])
     result = {"SSIM": mean(per_view["SSIM"]), "PSNR": mean(per_view["PSNR"]), "LPIPS": lpips_mean,
               "LPIPS_variant": lpips_variant if lpips_mean is not None else None}
-    if "Spearman" in per_view:
-        result.update({"Spearman": mean(per_view["Spearman"]), "AUSE": mean(per_view["AUSE"])})
+    keys = [k for k in per_view if k not in ("SSIM", "PSNR", "LPIPS")]
+    result.update({k: mean(per_view[k]) for k in keys})
+    if keys:
+        result["uncertainty_object_region"] = object_region_text
     return result

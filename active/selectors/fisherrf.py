@@ -12,6 +12,10 @@ Scale convention: h is in the units of the rendered image (colours in [0, 1]) su
 the run's `--sigma` (1 by default, as FisherRF, whose lambda = 1e-6 is the default here); lambda is added to h as is,
 so it is not rescaled with the resolution or sigma. Counts: every candidate scored at every pick is one oracle
 evaluation, conservative = evaluated = sum_{j < min(K, M)} (M - j); ties go to the lowest view id.
+
+`--fisherrf_variant`: "exact" (default) scores the exact diagonal above; "reference" scores the diagonal FisherRF's
+public code computes (`active.fisher.fisher_view_diagonals_reference`: channel-summed squares for geometry and
+opacity, the exp / sigmoid derivative applied once after squaring; rotation cannot be scored), see docs/deviations.md.
 """
 from __future__ import annotations
 
@@ -26,6 +30,7 @@ from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from utils.errors import UserError
 
 DEFAULT_GROUPS = "means,log_scales,logit_opacities,sh_dc,sh_rest"  # FisherRF's set: every parameter but rotation
+VARIANTS = {"exact": "diagonal", "reference": "diagonal_reference"}  # --fisherrf_variant -> the oracle kind
 
 
 def parse_groups(text: str) -> tuple[str, ...]:
@@ -44,11 +49,17 @@ class FisherRFConfig:
                                                                    "lambda), in units of the diagonal Fisher"})
     fisherrf_params: str = field(default=DEFAULT_GROUPS, metadata={"help": "comma-separated raw parameter groups "
                                                                            "scored (default: all but quats)"})
+    fisherrf_variant: str = field(default="exact", metadata={"help": "Fisher diagonal: exact (per-channel squares, "
+                                                                     "full chain rule) or reference (FisherRF's code)"})
 
     def __post_init__(self) -> None:
         if not self.fisherrf_lambda > 0:
             raise UserError(f"--fisherrf_lambda must be positive, got {self.fisherrf_lambda}")
-        parse_groups(self.fisherrf_params)
+        if self.fisherrf_variant not in VARIANTS:
+            raise UserError(f"--fisherrf_variant {self.fisherrf_variant!r}: choose one of {', '.join(VARIANTS)}")
+        if self.fisherrf_variant == "reference" and "quats" in parse_groups(self.fisherrf_params):
+            raise UserError("--fisherrf_variant reference cannot score quats (FisherRF's code leaves rotation out); "
+                            "drop quats from --fisherrf_params")
 
 
 @register_selector("fisherrf", config=FisherRFConfig)
@@ -60,6 +71,7 @@ class FisherRFSelector(Selector):
     def __init__(self, config: FisherRFConfig = FisherRFConfig()):
         self.config = config
         self.groups = parse_groups(config.fisherrf_params)
+        self.oracle_kind = VARIANTS[config.fisherrf_variant]
 
     def conservative_count(self, m: int, k: int) -> int:
         return exhaustive_count(m, k)

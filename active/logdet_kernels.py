@@ -1,0 +1,128 @@
+"""Compiled (numba) per-block log-det gains and commits over the Gaussians a view sees, float64 arithmetic.
+
+A view's information enters as a factor, H_v,i = R_i R_i^T with R_i [P, r] (`active.logdet.ViewFactors`), and the
+running information A_i = L_i L_i^T by its Cholesky factor L_i [P, P]. Per visible block b (Gaussian i = idx[b]):
+
+    Y = L_i^-1 R_i                       forward substitution, P^2 r / 2 multiply-adds
+    gain term = logdet(I_r + Y^T Y)      Sylvester: = logdet(I_P + L^-1 H L^-T); Cholesky of an r x r matrix whose
+                                         eigenvalues are >= 1, so it cannot fail
+    commit: C C^T = I_P + Y Y^T,  L_i <- L_i C
+
+Each term is clamped at 0 (its exact value is >= 0; roundoff can leave -1e-16) and a commit skips the blocks whose
+term is 0, so logdet(A) grows by exactly the sum of the clamped terms the gain reported. The blocks are split into
+one contiguous slice per thread with its scratch arrays allocated once. `active.logdet` holds the torch twin
+(`factor_gain_terms_torch`, `factor_commit_torch`) that the tests compare with these kernels.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(inline="always", cache=True)
+def _whiten(chol, i, factors, b, y):
+    """y [P, r] <- L_i^-1 R_b by forward substitution (row by row, inner loop over the r columns)."""
+    p, r = factors.shape[1], factors.shape[2]
+    for k in range(p):
+        inv = 1.0 / chol[i, k, k]
+        for c in range(r):
+            y[k, c] = factors[b, k, c]
+        for j in range(k):
+            ljk = chol[i, k, j]
+            for c in range(r):
+                y[k, c] -= ljk * y[j, c]
+        for c in range(r):
+            y[k, c] *= inv
+
+
+@njit(inline="always", cache=True)
+def _logdet_spd(m, n):
+    """In-place Cholesky of the leading n x n of the symmetric m (lower triangle used); returns log det, or -inf when
+    a pivot is not positive."""
+    total = 0.0
+    for k in range(n):
+        d = m[k, k]
+        for j in range(k):
+            d -= m[k, j] * m[k, j]
+        if not d > 0.0:
+            return -math.inf
+        d = math.sqrt(d)
+        m[k, k] = d
+        total += math.log(d)
+        inv = 1.0 / d
+        for i in range(k + 1, n):
+            s = m[i, k]
+            for j in range(k):
+                s -= m[i, j] * m[k, j]
+            m[i, k] = s * inv
+    return 2.0 * total
+
+
+@njit(parallel=True, cache=True)
+def gain_terms(chol, indices, factors, num_slices):
+    """Per visible block logdet(I + L^-1 R R^T L^-T), clamped at 0.
+
+    Args:
+        chol: Cholesky factors L of the running information, float64. [N, P, P]
+        indices: the Gaussian of each visible block, int64. [n]
+        factors: R of each visible block, float32 or float64. [n, P, r]
+        num_slices: contiguous slices of blocks, one per thread.
+    Returns:
+        terms, float64. [n]
+    """
+    n, p, r = factors.shape
+    terms = np.zeros(n)
+    per = (n + num_slices - 1) // num_slices
+    for s in prange(num_slices):
+        y = np.empty((p, r))
+        g = np.empty((r, r))
+        for b in range(s * per, min(n, (s + 1) * per)):
+            _whiten(chol, indices[b], factors, b, y)
+            for a in range(r):  # lower triangle of I + Y^T Y
+                for c in range(a + 1):
+                    acc = 0.0
+                    for k in range(p):
+                        acc += y[k, a] * y[k, c]
+                    g[a, c] = acc
+                g[a, a] += 1.0
+            terms[b] = max(_logdet_spd(g, r), 0.0)
+    return terms
+
+
+@njit(parallel=True, cache=True)
+def commit(chol, indices, factors, num_slices):
+    """L_i <- L_i C with C C^T = I + Y Y^T, Y = L_i^-1 R, in place on `chol` [N, P, P] for the visible blocks whose
+    clamped term (the logdet of C C^T) is > 0; returns the terms [n] float64 (0 where skipped)."""
+    n, p, r = factors.shape
+    terms = np.zeros(n)
+    per = (n + num_slices - 1) // num_slices
+    for s in prange(num_slices):
+        y = np.empty((p, r))
+        m = np.empty((p, p))
+        out = np.empty((p, p))
+        for b in range(s * per, min(n, (s + 1) * per)):
+            i = indices[b]
+            _whiten(chol, i, factors, b, y)
+            for a in range(p):  # lower triangle of I + Y Y^T
+                for c in range(a + 1):
+                    acc = 0.0
+                    for k in range(r):
+                        acc += y[a, k] * y[c, k]
+                    m[a, c] = acc
+                m[a, a] += 1.0
+            term = _logdet_spd(m, p)
+            if not term > 0.0:
+                continue
+            terms[b] = term
+            for a in range(p):  # L C, both lower triangular
+                for c in range(a + 1):
+                    acc = 0.0
+                    for k in range(c, a + 1):
+                        acc += chol[i, a, k] * m[k, c]
+                    out[a, c] = acc
+            for a in range(p):
+                for c in range(a + 1):
+                    chol[i, a, c] = out[a, c]
+    return terms

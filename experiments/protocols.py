@@ -2,6 +2,17 @@
 
 Iteration counts are paper scale; `RunScale.iter_scale` shrinks them (and the densification start and the
 opacity-reset interval) for CPU-sized runs. Directory names follow `<method>[_k<K>][_eps<E>]`.
+
+`fisherrf20` / `fisherrf20_360` are the protocol of FisherRF (Jiang et al. 2024) that POP-GS reuses, read from
+FisherRF's public code (github.com/JiangWenPL/FisherRF): `scripts/blender_seq1.sh` and `scripts/mip360_seq1.sh`
+run `active_train.py --eval --schema v20seq1_inplace --iterations 30000` (Blender, `--white_background`) and
+`--iterations 20000` (Mip-NeRF 360); `active/schema.py` defines `v20seq1_inplace` as `VNSeqMInplace(N=20, M=1,
+num_init_views=4, interval_epochs=100)`: seed views = training view 0 plus 3 by farthest-point sampling of camera
+centres (the candidate farthest from the chosen set, first index on ties), then one view per step up to 20, the
+step after a stage of 100 x |train| iterations (views are added at iterations 400, 900, 1500, ..., 18,400).
+Seeding here is the same (`active.schedule.farthest_point_views`, from view 0). One difference: FisherRF's
+`active_train.py` reloads the initial Gaussians and restarts the learning-rate and densification clock after each
+acquisition; these protocols keep training the current model (the project's default, as in Setups 1-4).
 """
 from __future__ import annotations
 
@@ -30,6 +41,8 @@ class Protocol:
     k_in_name: bool = False  # directory names carry _k<K> (the K sweep)
 
 
+SIX_METHODS = ("random", "coverage", "fisherrf", "pop_gs", "lite_gs", "ssg")
+
 PROTOCOLS: dict[str, Protocol] = {
     "setup1": Protocol("2 seed views, +3 per step to 11, 100 v iterations per stage, 11,000 in total "
                        "(Blender, Mip-NeRF 360)", 2, (3,), 11, 100, 11_000, ("lego",),
@@ -44,6 +57,11 @@ PROTOCOLS: dict[str, Protocol] = {
     "ablation_ssg": Protocol("lite_gs vs ssg on ship, Setup 4 protocol with K = 4, "
                              "eps in {0.1, 0.2, 0.25, 0.4, 0.6}", 3, (4,), 15, 300, 15_000, ("ship",),
                              ("lite_gs", "ssg"), eps_sweep=(0.1, 0.2, 0.25, 0.4, 0.6)),
+    "fisherrf20": Protocol("FisherRF / POP-GS: 4 seed views (view 0 + farthest-point sampling), +1 per step to 20, "
+                           "100 v iterations per stage, 30,000 in total (Blender)", 4, (1,), 20, 100, 30_000,
+                           ("lego",), SIX_METHODS),
+    "fisherrf20_360": Protocol("FisherRF / POP-GS on Mip-NeRF 360: as fisherrf20 with 20,000 iterations in total",
+                               4, (1,), 20, 100, 20_000, ("bonsai",), SIX_METHODS),
 }
 
 

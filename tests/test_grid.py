@@ -10,10 +10,12 @@ import time
 from pathlib import Path
 
 import pytest
+import torch
 
 from active import build_selector
 from active.oracle_counts import mean_rounded_up, schedule_counts
 from active.registry import selector_options
+from active.schedule import farthest_point_views, plan_stages
 from experiments import grid_args
 from experiments.protocols import PROTOCOLS, RunScale, expand
 from tests.conftest import ROOT
@@ -37,7 +39,10 @@ PAPER = {"setup1": (2, (3,), 11, 100, 11_000, {3: {0.1}}),
          "setup2": (5, (4,), 21, 300, 21_000, {4: {0.1}}),
          "setup3": (3, (4,), 15, 100, 11_000, {4: {0.1}}),
          "setup4": (3, (3, 4, 6), 15, 300, 15_000, {3: {0.1}, 4: {0.1}, 6: {0.1, 0.3, 0.6}}),
-         "ablation_ssg": (3, (4,), 15, 300, 15_000, {4: {0.1, 0.2, 0.25, 0.4, 0.6}})}
+         "ablation_ssg": (3, (4,), 15, 300, 15_000, {4: {0.1, 0.2, 0.25, 0.4, 0.6}}),
+         # FisherRF's scripts/blender_seq1.sh and mip360_seq1.sh with schema v20seq1_inplace (active/schema.py)
+         "fisherrf20": (4, (1,), 20, 100, 30_000, {1: {0.1}}),
+         "fisherrf20_360": (4, (1,), 20, 100, 20_000, {1: {0.1}})}
 
 
 @pytest.mark.parametrize("setup", list(PAPER))
@@ -63,6 +68,29 @@ def test_expansion_matches_the_paper_protocols(setup):
         assert tags == {f"{m}_eps{e:g}" for m in ("lite_gs", "ssg") for e in lite_eps[4]} | {"random", "pop_gs"}
     else:
         assert tags == set(methods)
+
+
+def fisherrf_seed_views(centers: torch.Tensor, n: int) -> list[int]:
+    """FisherRF's VNSeqMInplace seeding, transcribed: view 0, then the candidate farthest from the chosen set."""
+    chosen, candidates = [0], list(range(1, len(centers)))
+    while len(chosen) < n:
+        dist = torch.cdist(centers[candidates], centers[chosen]).min(dim=1).values
+        chosen.append(candidates.pop(int(dist.argmax())))
+    return chosen
+
+
+def test_fisherrf_protocol_schedule_and_seeds():
+    """Views added at FisherRF's iterations (100 x |train| after each stage: 400, 900, 1500, ..., 18,400) and the
+    same seed views as FisherRF's seeding on random and on ring-shaped (tied) camera layouts."""
+    p = PROTOCOLS["fisherrf20"]
+    plan = plan_stages(p.num_init_views, p.ks[0], p.max_views, 100, p.iters_per_view, p.iterations)
+    assert plan.adds == (1,) * 16
+    assert plan.stage_end[:3] == (400, 900, 1500) and plan.stage_end[15] == 18_400 and plan.stage_end[16] == 30_000
+    g = torch.Generator().manual_seed(0)
+    ring = torch.stack([torch.cos(torch.arange(12) * 0.5236), torch.sin(torch.arange(12) * 0.5236),
+                        torch.zeros(12)], 1).double()
+    for centers in (torch.randn(100, 3, generator=g, dtype=torch.float64), ring):
+        assert farthest_point_views(centers, 4) == fisherrf_seed_views(centers, 4)
 
 
 def test_eps_naming_and_scaling():

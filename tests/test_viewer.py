@@ -13,6 +13,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 import torch
 
 from gaussian_renderer.projection import quat_to_rotmat
@@ -86,6 +87,7 @@ def test_viewer_in_browser(active_model):
         close(driver)
 
 
+@pytest.mark.auto_backend  # the viewer renders with the model's settings, as view.py does
 def test_clicking_a_camera_shows_its_image_render_and_uncertainty(active_model):
     from reports.images import open_rgb
     from reports.viewer import Viewer

@@ -104,6 +104,12 @@ def run_cameras(entries: list[dict], num_test: int, selection: dict | None) -> l
     """
     test = [camera_from_entry(e, "test cameras", colors.TEST) for e in entries[:num_test]]
     train = entries[num_test:]
+    if not train:  # no cameras.json (or no training views in it): nothing to draw
+        return test
+    named = [v for s in (selection or {}).get("stages", []) for v in s["train_views"] + s["selected"]]
+    if named and max(named) >= len(train):
+        raise UserError(f"selection.json names training view {max(named)} but cameras.json has {len(train)} "
+                        "training views; the files are from different runs")
     if not selection or not selection.get("stages"):
         return test + [camera_from_entry(e, "training views", colors.TRAIN, info={"view": v})
                        for v, e in enumerate(train)]

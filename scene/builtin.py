@@ -99,6 +99,23 @@ def scene_gaussians(seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor
     return means, quats, scales[:, None].repeat(1, 3), torch.full((n,), 0.9), colors  # isotropic scales
 
 
+def render_rgba(viewmat: torch.Tensor, intrinsics: torch.Tensor, width: int, height: int, seed: int = 0,
+                gaussians: tuple[torch.Tensor, ...] | None = None) -> torch.Tensor:
+    """The scene's ground truth from any pose: straight (un-premultiplied) RGB and alpha, as the dataset's PNGs.
+
+    Args:
+        viewmat: world-to-camera, OpenCV axes. [4, 4]
+        intrinsics: (fx, fy, cx, cy) in pixels. [4]
+        gaussians: `scene_gaussians(seed)` when already computed.
+    Returns:
+        RGBA in [0, 1]. [4, H, W]
+    """
+    means, quats, scales3, opacities, colors = gaussians or scene_gaussians(seed)
+    out = rasterization(means, quats, scales3, opacities, colors, viewmat.float(), intrinsics.float(), width, height)
+    straight = (out.image / out.alpha.clamp(1e-6, 1)).clamp(0, 1)  # un-premultiply (black background)
+    return torch.cat([straight, out.alpha[None]])
+
+
 def _render_splits(out: Path, seed: int, resolution: int, num_train: int, num_test: int) -> None:
     """Render the scene's Gaussians from every camera; write the RGBA PNGs and both transforms files."""
     means, quats, scales3, opacities, colors = scene_gaussians(seed)
@@ -108,11 +125,9 @@ def _render_splits(out: Path, seed: int, resolution: int, num_train: int, num_te
         frames = []
         for idx, eye in enumerate(hemisphere_positions(count, offset)):
             viewmat = look_at(eye)
-            out_img = rasterization(means, quats, scales3, opacities, colors, viewmat.float(),
-                                    intrinsics, resolution, resolution)
-            alpha = out_img.alpha.clamp(1e-6, 1)
-            straight = (out_img.image / alpha).clamp(0, 1)  # un-premultiply (black background)
-            save_image(torch.cat([straight, out_img.alpha[None]]), out / split / f"r_{idx}.png")
+            save_image(render_rgba(viewmat, intrinsics, resolution, resolution, seed, (means, quats, scales3,
+                                                                                      opacities, colors)),
+                       out / split / f"r_{idx}.png")
             c2w = torch.linalg.inv(viewmat) @ GL_TO_CV  # the flip is its own inverse
             frames.append({"file_path": f"./{split}/r_{idx}", "transform_matrix": c2w.tolist()})
         write_json(out / f"transforms_{split}.json", {"camera_angle_x": CAMERA_ANGLE_X, "frames": frames})

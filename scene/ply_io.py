@@ -61,8 +61,8 @@ def load_ply(path: str | os.PathLike) -> tuple[dict[str, torch.Tensor], int]:
         num_rest = sum(1 for nm in names if nm.startswith("f_rest_"))
         missing = [nm for nm in ply_attribute_names(num_rest) if nm not in names and nm not in ("nx", "ny", "nz")]
         if missing:
-            raise UserError(f"{path} lacks the 3DGS property '{missing[0]}' ({len(missing)} missing), so it is not a "
-                            "3DGS point cloud; point to a PLY written by train.py")
+            raise UserError(f"{path} lacks the 3DGS properties {', '.join(missing)}, so it is not a 3DGS point "
+                            "cloud; point to a PLY written by train.py or another 3DGS trainer")
         degree = next((d for d in range(MAX_PLY_SH_DEGREE + 1) if 3 * ((d + 1) ** 2 - 1) == num_rest), None)
         if degree is None:
             raise UserError(f"{path} has {num_rest} f_rest properties, which matches no SH degree 0..3 "

@@ -76,7 +76,7 @@ def test_corrupt_and_foreign_files(tmp_path):
         GaussianModel.load_ply(truncated)
     foreign = tmp_path / "foreign.ply"
     foreign.write_text("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1.0\n")
-    with pytest.raises(UserError, match="foreign.ply lacks the 3DGS property 'y'"):
+    with pytest.raises(UserError, match="foreign.ply lacks the 3DGS properties y, z, f_dc_0, "):
         GaussianModel.load_ply(foreign)
     faces = tmp_path / "faces.ply"
     faces.write_text("ply\nformat ascii 1.0\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n")

@@ -1,16 +1,13 @@
 """The views a run starts from and one acquisition step's selection (the stage record of selection.json)."""
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import torch
 
-from active import Selector, SelectionContext
-from active.fisher import build_oracle
+from active import Selector, acquisition
 from active.schedule import farthest_point_views
 from gaussian_renderer import RasterSettings
-from gaussian_renderer.projection import camera_centers, look_at_point
 from scene.scene import Scene
 from training.config import TrainConfig
 from training.state import TrainState
@@ -34,21 +31,11 @@ def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
 def select_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: Selector, k: int,
                  background: torch.Tensor, settings: RasterSettings) -> dict[str, Any]:
     """Run the selector for one acquisition step; returns the stage record for selection.json."""
-    a = cfg.active
     candidates = [v for v in range(len(scene.train_cameras)) if v not in state.train_views]
-    t0 = time.perf_counter()
-    oracle = None
-    if selector.uses_oracle:
-        oracle = build_oracle(selector.oracle_kind, state.gaussians, scene.train_cameras, state.train_views,
-                              background, settings, sigma=a.sigma, delta_rel=a.delta_rel, delta_abs=a.delta_abs,
-                              param_groups=a.fisher_params, mode=a.fisher_mode, cache_mb=a.fisher_cache_mb)
-    generator = torch.Generator().manual_seed(cfg.run.seed * 100_003 + state.stage)
-    viewmats = torch.stack([c.viewmat.cpu() for c in scene.train_cameras])  # [V, 4, 4]
-    selection = selector.select(SelectionContext(candidate_ids=candidates, oracle=oracle, generator=generator,
-                                                 stage=state.stage, train_ids=tuple(state.train_views),
-                                                 camera_centers=camera_centers(viewmats),
-                                                 scene_center=look_at_point(viewmats)), k)
-    select_seconds = time.perf_counter() - t0
+    step = acquisition.select_views(selector, state.gaussians, scene.train_cameras, state.train_views, candidates, k,
+                                    background, settings, seed=cfg.run.seed, stage=state.stage,
+                                    fisher=acquisition.FisherSettings.from_active(cfg.active))
+    selection = step.selection
     return {
         "stage": state.stage,
         "iteration": state.iteration,
@@ -56,9 +43,9 @@ def select_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: Se
         "candidates": len(candidates),
         "selected": [int(v) for v in selection.ids],
         "gains": [float(g) for g in selection.gains],
-        "oracle_calls": {"conservative": selection.conservative, "evaluated": oracle.evaluated if oracle else 0},
-        "fisher_views_computed": oracle.views_computed if oracle else 0,
-        "fisher_seconds": oracle.fisher_seconds if oracle else 0.0,
-        "select_seconds": select_seconds,
+        "oracle_calls": {"conservative": selection.conservative, "evaluated": step.evaluated},
+        "fisher_views_computed": step.fisher_views_computed,
+        "fisher_seconds": step.fisher_seconds,
+        "select_seconds": step.seconds,
         "test_psnr": test_psnr(state.gaussians, scene.test_cameras, background, settings),
     }

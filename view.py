@@ -1,9 +1,10 @@
 """Live 3D viewer of a trained model in the browser (viser): the Gaussians as splats, the cameras as frusta in the
 colours of the run's report (seed views, each stage's picks numbered, candidates, test cameras); click a camera
-to see its image, a render from it and its uncertainty map (render.py --uncertainty).
+to see its image, a render from it and its uncertainty map of one kind (render.py --uncertainty).
 
     python view.py -m output/lego              # prints http://localhost:PORT; Ctrl-C stops it
     python view.py -m output/lego --port 8090  # a port in use: the next free one is taken, and said
+    python view.py -m output/lego --uncertainty_kind position_variance
 """
 from __future__ import annotations
 
@@ -25,6 +26,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--iteration", type=int, default=-1, help="saved iteration to show (-1 = the last)")
     parser.add_argument("--port", type=int, default=8080, help="port on localhost (default 8080; the next free one "
                                                                 "when it is in use)")
+    parser.add_argument("--uncertainty_kind", choices=("fisherrf_view", "fisherrf", "position_variance"),
+                        default=None, help="uncertainty map kind shown (default: the first written of fisherrf_view, "
+                                           "fisherrf, position_variance)")
     args = parser.parse_args(argv)
     if not 1 <= args.port <= 65535:
         raise UserError(f"--port must be in 1..65535, got {args.port}")
@@ -32,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     from scene.trained import load_trained
 
     trained = load_trained(args.model_path, args.iteration, args.source_path, device="cpu")
-    viewer = Viewer(trained, args.port)
+    viewer = Viewer(trained, args.port, args.uncertainty_kind)
     if viewer.port != args.port:
         print(f"port {args.port} is in use; serving on port {viewer.port} instead")
     print(f"viewer of {args.model_path}: http://localhost:{viewer.port} (Ctrl-C stops it)", flush=True)

@@ -52,6 +52,9 @@ def build_parser(description: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--uncertainty", action="store_true",
                    help="render the uncertainty maps too (render.py --uncertainty); results.json and the summary "
                         "then carry Spearman and AUSE (a rerun with it adds them to finished runs)")
+    p.add_argument("--report", action="store_true",
+                   help="after the summary, write the grid report OUT/<setup>/report.html and every run's report.html "
+                        "(as report.py --grid OUT/<setup>)")
     p.add_argument("--progress_every", default="300",
                    help="seconds between the progress lines of running jobs (iteration, Gaussians; default 300)")
     p.add_argument("--dry_run", action="store_true", help="print the jobs (slurm: also write the sbatch file) "
@@ -154,6 +157,6 @@ def parse(argv: list[str], description: str | None = None) -> GridConfig:
     cfg = GridConfig(setup=args.setup, data=data, out=out, runs=tuple(runs), scale=scale, device=device,
                      extra_args=tuple(extra), launcher=args.launcher, max_parallel=max_parallel, threads=threads,
                      python=str(Path(args.python).absolute()) if os.sep in args.python else args.python,
-                     slurm=slurm, dry_run=args.dry_run, uncertainty=args.uncertainty,
+                     slurm=slurm, dry_run=args.dry_run, uncertainty=args.uncertainty, report=args.report,
                      progress_every_s=_float("progress_every", args.progress_every, 0.0))
     return cfg

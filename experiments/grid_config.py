@@ -39,6 +39,7 @@ class GridConfig:
     slurm: SlurmOptions = field(default_factory=SlurmOptions)
     dry_run: bool = False
     uncertainty: bool = False  # render.py --uncertainty in every job
+    report: bool = False  # write the grid report (reports.write_grid_report) after the summary
     progress_every_s: float = 300.0  # a line per running job (its run_status.json progress) this often
 
     @property

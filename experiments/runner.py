@@ -2,7 +2,8 @@
 
 Layout under OUT/<setup>: the runs (<scene>/<tag>/seed<S>), logs/<scene>/<tag>/seed<S>.log (one per job),
 grid.json (the flags the runs were made with), grid_status.json (every job's state, command, log, error line),
-.submitit/ (submitit's pickles and worker logs), summary.md / summary.csv / plots (experiments/summary.py).
+.submitit/ (submitit's pickles and worker logs), summary.md / summary.csv / plots (experiments/summary.py), with
+--report report.html (reports.write_grid_report).
 The pieces: `grid_config` (the validated command line, each run's job), `flags` (never mix runs made with other
 flags), `progress` (`Tracker`), `launchers` (inline, local, Slurm), `summary`.
 """
@@ -54,10 +55,25 @@ def run_grid(cfg: GridConfig) -> int:
     failed = tracker.count("failed")
     has_runs = any(next(cfg.setup_dir.rglob(marker), None) for marker in (SELECTION, RUN_STATUS))
     summary_ok = summarize(cfg.setup_dir) if has_runs else True
+    if cfg.report and has_runs:
+        summary_ok = write_report(cfg.setup_dir) and summary_ok
     if failed:
         log.info(f"{failed} job(s) failed (see the log paths above and {tracker.path}); rerun the same command "
                  "to resume them")
     return failed + (0 if summary_ok else 1)
+
+
+def write_report(setup_dir: Path) -> bool:
+    """The grid report of OUT/<setup> and its runs' reports (reports.write_grid_report), logged; False when it
+    fails (with its `error:` line)."""
+    from reports import write_grid_report  # plotly: only with --report
+
+    try:
+        log.info(f"wrote {write_grid_report(setup_dir)}")
+    except UserError as exc:
+        log.info(f"report: error: {exc}")
+        return False
+    return True
 
 
 def summarize(setup_dir: Path) -> bool:

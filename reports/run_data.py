@@ -1,8 +1,8 @@
 """Everything a run report shows, read from a model directory (no HTML here).
 
 A model directory (train.py / render.py / metrics.py) holds cfg_args, cameras.json, selection.json (active runs),
-run_status.json, point_cloud/iteration_N/point_cloud.ply, test/ours_N/{renders,gt,uncertainty}, results.json and
-per_view.json. Whatever is absent is listed in `RunData.absent` and the report says so.
+run_status.json, point_cloud/iteration_N/point_cloud.ply, test/ours_N/{renders,gt}, test/ours_N/uncertainty/KIND/
+(render.py --uncertainty: NNNNN.png maps and colorbar.png per map kind), results.json and per_view.json. Whatever is absent is listed in `RunData.absent` and the report says so.
 """
 from __future__ import annotations
 
@@ -26,11 +26,11 @@ _ITER = re.compile(r"(?:iteration|ours)_(\d+)")
 
 @dataclass
 class GalleryItem:
-    """One test view: file paths of ground truth, render and (render.py --uncertainty) uncertainty map."""
+    """One test view: file paths of ground truth, render and (render.py --uncertainty) uncertainty maps."""
     name: str
     gt: Path
     render: Path
-    uncertainty: Path | None
+    uncertainty: dict[str, Path | None]  # map kind -> its PNG of this view (None: not written)
     psnr: float | None
 
 
@@ -49,7 +49,7 @@ class RunData:
     points_note: str
     gallery: list[GalleryItem]
     gallery_note: str
-    colorbar: Path | None               # uncertainty colour bar of render.py --uncertainty
+    colorbars: dict[str, Path | None]   # map kind -> its colour bar (render.py --uncertainty), kinds in gallery order
     absent: list[str] = field(default_factory=list)
     incomplete: str | None = None
 
@@ -104,6 +104,12 @@ def run_cameras(entries: list[dict], num_test: int, selection: dict | None) -> l
     """
     test = [camera_from_entry(e, "test cameras", colors.TEST) for e in entries[:num_test]]
     train = entries[num_test:]
+    if not train:  # no cameras.json (or no training views in it): nothing to draw
+        return test
+    named = [v for s in (selection or {}).get("stages", []) for v in s["train_views"] + s["selected"]]
+    if named and max(named) >= len(train):
+        raise UserError(f"selection.json names training view {max(named)} but cameras.json has {len(train)} "
+                        "training views; the files are from different runs")
     if not selection or not selection.get("stages"):
         return test + [camera_from_entry(e, "training views", colors.TRAIN, info={"view": v})
                        for v, e in enumerate(train)]
@@ -157,17 +163,31 @@ def gaussian_points(ply: Path, max_points: int = MAX_POINTS, seed: int = 0) -> t
     return xyz[keep], (rgb[keep] * 255 + 0.5).astype(np.uint8), len(xyz)
 
 
-def gallery_items(method_dir: Path, per_view: dict | None, limit: int = MAX_GALLERY) -> list[GalleryItem]:
-    """The rendered test views of test/ours_N (evenly spaced subset of at most `limit`)."""
+def uncertainty_kinds(method_dir: Path) -> list[str]:
+    """The map kinds render.py --uncertainty wrote: the folders of `method_dir/uncertainty/` holding PNG maps
+    (object_mask/ is the metrics' region, not a map), sorted by name."""
+    folder = method_dir / "uncertainty"
+    return sorted(d.name for d in folder.glob("*") if d.is_dir() and d.name != "object_mask" and any(d.glob("*.png")))
+
+
+def uncertainty_keys(results: dict[str, Any] | None) -> list[tuple[str, str, str, float]]:
+    """(metric, kind, region, value) of the METRIC/KIND/REGION keys of a results.json entry, in its order."""
+    return [(*key.split("/"), float(v)) for key, v in (results or {}).items()
+            if key.count("/") == 2 and isinstance(v, (int, float))]
+
+
+def gallery_items(method_dir: Path, per_view: dict | None, kinds: list[str],
+                  limit: int = MAX_GALLERY) -> list[GalleryItem]:
+    """The rendered test views of test/ours_N (evenly spaced subset of at most `limit`) with the maps of `kinds`."""
     names = sorted(p.name for p in (method_dir / "renders").glob("*.png") if (method_dir / "gt" / p.name).is_file())
     if len(names) > limit:
         names = [names[i] for i in np.linspace(0, len(names) - 1, limit).round().astype(int)]
     psnr = (per_view or {}).get("PSNR", {})
     items = []
     for n in names:
-        unc = method_dir / "uncertainty" / n
+        maps = {k: method_dir / "uncertainty" / k / n for k in kinds}
         items.append(GalleryItem(n, method_dir / "gt" / n, method_dir / "renders" / n,
-                                 unc if unc.is_file() else None, psnr.get(n)))
+                                 {k: p if p.is_file() else None for k, p in maps.items()}, psnr.get(n)))
     return items
 
 
@@ -220,18 +240,19 @@ def gather_run(model_dir: str | Path) -> RunData:
         method_key, results = key, results_all[key]
     else:
         absent.append("results.json (run metrics.py -m MODEL_DIR for PSNR / SSIM / LPIPS)")
-    gallery, colorbar = [], None
+    gallery, colorbars = [], {}
     if method_dir is None:
         absent.append("test/ours_N/renders (run render.py -m MODEL_DIR for the gallery)")
         gallery_note = ""
     else:
-        gallery = gallery_items(method_dir, per_view_all.get(method_dir.name))
+        kinds = uncertainty_kinds(method_dir)
+        gallery = gallery_items(method_dir, per_view_all.get(method_dir.name), kinds)
         total = len(list((method_dir / "renders").glob("*.png")))
         gallery_note = f"{len(gallery)} of {total} test views ({method_dir.name})"
-        if not any(g.uncertainty for g in gallery):
+        if not kinds:
             absent.append("uncertainty maps (render.py --uncertainty writes them)")
-        cb = method_dir / "uncertainty" / "colorbar.png"
-        colorbar = cb if cb.is_file() else None
+        colorbars = {k: cb if (cb := method_dir / "uncertainty" / k / "colorbar.png").is_file() else None
+                     for k in kinds}
 
     incomplete = None
     if status is None:
@@ -244,4 +265,4 @@ def gather_run(model_dir: str | Path) -> RunData:
                       + f"; this report shows what finished ({len((selection or {}).get('stages', []))} "
                         "acquisition stages recorded)")
     return RunData(model_dir, cfg, selection, status, results, method_key, cameras, xyz, rgb, note, gallery,
-                   gallery_note, colorbar, absent, incomplete)
+                   gallery_note, colorbars, absent, incomplete)

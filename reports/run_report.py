@@ -9,7 +9,7 @@ from pathlib import Path
 from reports.figures import psnr_views_figure, scene_figure
 from reports.images import data_uri, error_map, file_uri, open_rgb
 from reports.page import Page, esc, image_cell
-from reports.run_data import RunData, gather_run
+from reports.run_data import RunData, gather_run, uncertainty_keys
 
 REPORT_NAME = "report.html"
 
@@ -61,8 +61,8 @@ def stage_rows(run: RunData) -> list[list[str]]:
 
 
 def gallery_html(run: RunData) -> str:
-    """Header row plus per test view: ground truth | render | error | uncertainty, each clickable."""
-    heads = ["ground truth", "render", "|error| (0–0.25)", "uncertainty (render.py --uncertainty)"]
+    """Header row plus per test view: ground truth | render | error | one uncertainty map per kind, each clickable."""
+    heads = ["ground truth", "render", "|error| (0–0.25)"] + [f"uncertainty: {k}" for k in run.colorbars]
     cells = [f"<div class='head'>{esc(h)}</div>" for h in heads]
     for item in run.gallery:
         gt, render = open_rgb(item.gt), open_rgb(item.render)
@@ -71,9 +71,10 @@ def gallery_html(run: RunData) -> str:
                   image_cell(data_uri(render), f"{item.name} render{psnr}")]
         cells.append(image_cell(data_uri(error_map(gt, render)), f"{item.name} |error|")
                      if gt.shape == render.shape else "<figure>size mismatch</figure>")
-        cells.append(image_cell(file_uri(item.uncertainty), f"{item.name} uncertainty")
-                     if item.uncertainty else "<figure class='small'>not rendered</figure>")
-    return f"<div class='gallery'>{''.join(cells)}</div>"
+        cells += [image_cell(file_uri(path), f"{item.name} uncertainty: {kind}") if path
+                  else "<figure class='small'>not rendered</figure>" for kind, path in item.uncertainty.items()]
+    style = f" style='grid-template-columns: repeat({len(heads)},minmax(0,1fr))'"
+    return f"<div class='gallery'{style}>{''.join(cells)}</div>"
 
 
 def build_run_page(run: RunData) -> Page:
@@ -106,11 +107,11 @@ def build_run_page(run: RunData) -> Page:
         lp = f"{r['LPIPS']:.4f} ({r.get('LPIPS_variant')})" if r.get("LPIPS") is not None else "unavailable"
         headers, row = ["iteration", "PSNR", "SSIM", "LPIPS (variant)"], [run.method_key, f"{r['PSNR']:.2f}",
                                                                           f"{r['SSIM']:.4f}", lp]
-        for extra in ("Spearman", "AUSE"):
-            if r.get(extra) is not None:
-                headers.append(extra + " (uncertainty vs error)")
-                row.append(f"{r[extra]:.4f}")
         page.table(headers, [row])
+        unc = uncertainty_keys(r)
+        if unc:
+            page.heading("Uncertainty vs error (metrics.py)")
+            page.table(["metric", "map kind", "region", "value"], [[m, k, g, f"{v:.4f}"] for m, k, g, v in unc])
     else:
         page.paragraph("no results.json (run metrics.py -m MODEL_DIR)")
 
@@ -118,8 +119,9 @@ def build_run_page(run: RunData) -> Page:
         page.heading("Test views")
         page.paragraph(f"{run.gallery_note}; click an image to enlarge.", "small")
         page.add(gallery_html(run))
-        if run.colorbar:
-            page.add(image_cell(file_uri(run.colorbar, "PNG", 600), "uncertainty colour bar (log10)"))
+        for kind, bar in run.colorbars.items():
+            if bar:
+                page.add(image_cell(file_uri(bar, "PNG", 600), f"uncertainty colour bar: {kind} (log10)"))
     page.heading("Settings")
     page.table(["setting", "value"], settings_rows(run))
     if run.cfg:

@@ -1,6 +1,6 @@
 """The live viewer behind view.py: a model's Gaussians as splats in the browser (viser), its cameras as frusta in
-the report's colours; clicking a camera shows its image, a render from it and its uncertainty map (where
-render.py --uncertainty wrote one)."""
+the report's colours; clicking a camera shows its image, a render from it and its uncertainty map of one kind (where
+render.py --uncertainty wrote one: SPLIT/ours_N/uncertainty/KIND/NNNNN.png)."""
 from __future__ import annotations
 
 import logging
@@ -63,21 +63,39 @@ def viewer_cameras(trained: TrainedModel) -> list[CameraView]:
     return run_cameras(entries, len(trained.scene.test_cameras), selection)
 
 
-def uncertainty_png(model_path: Path, index: int, num_test: int) -> Path | None:
-    """render.py --uncertainty's colour map of cameras.json entry `index` (test or train split), if written."""
+KIND_PREFERENCE = ("fisherrf_view", "fisherrf", "position_variance")  # view.py's default: the first one written
+
+
+def written_kinds(model_path: Path) -> list[str]:
+    """The map kinds of KIND_PREFERENCE that render.py --uncertainty wrote for the test or train split, in that
+    order."""
+    folders = [model_path / split / d.name / "uncertainty" for split in ("test", "train")
+               for d in (model_path / split).glob("ours_*")]
+    return [k for k in KIND_PREFERENCE if any(any((f / k).glob("*.png")) for f in folders)]
+
+
+def uncertainty_png(model_path: Path, index: int, num_test: int, kind: str) -> Path | None:
+    """render.py --uncertainty's colour map of kind `kind` of cameras.json entry `index` (test or train split),
+    if written."""
     split, i = ("test", index) if index < num_test else ("train", index - num_test)
-    method = latest([d for d in (model_path / split).glob("ours_*") if (d / "uncertainty").is_dir()])
-    path = method / "uncertainty" / f"{i:05d}.png" if method is not None else None
+    method = latest([d for d in (model_path / split).glob("ours_*") if (d / "uncertainty" / kind).is_dir()])
+    path = method / "uncertainty" / kind / f"{i:05d}.png" if method is not None else None
     return path if path is not None and path.is_file() else None
 
 
 class Viewer:
-    """A viser server showing one trained model. `Viewer(trained, port)`; `.port`, `.stop()`."""
+    """A viser server showing one trained model. `Viewer(trained, port, uncertainty_kind)`; `.port`, `.stop()`.
 
-    def __init__(self, trained: TrainedModel, port: int, host: str = "127.0.0.1"):
+    `uncertainty_kind`: the map kind shown (None: the first of KIND_PREFERENCE that was written, if any)."""
+
+    def __init__(self, trained: TrainedModel, port: int, uncertainty_kind: str | None = None,
+                 host: str = "127.0.0.1"):
         import viser
 
         self.trained = trained
+        if uncertainty_kind is None:
+            uncertainty_kind = next(iter(written_kinds(trained.path)), None)
+        self.uncertainty_kind = uncertainty_kind
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.port = self.server.get_port()
         self.cameras = viewer_cameras(trained)
@@ -123,9 +141,11 @@ class Viewer:
         with torch.no_grad():
             out = render(view, self.trained.gaussians, self.trained.background, self.trained.settings)
         self.images["render"].image = to_uint8(out.image)
-        unc = uncertainty_png(self.trained.path, index, len(self.trained.scene.test_cameras))
+        kind = self.uncertainty_kind
+        unc = uncertainty_png(self.trained.path, index, len(self.trained.scene.test_cameras), kind) if kind else None
         self.images["uncertainty"].image = open_rgb(unc) if unc else np.full((8, 8, 3), 200, np.uint8)
-        self.images["uncertainty"].label = "uncertainty" if unc else "uncertainty (render.py --uncertainty)"
+        self.images["uncertainty"].label = (f"uncertainty: {kind}" if unc else
+                                            f"uncertainty: {kind or 'none'} (not written; render.py --uncertainty)")
 
     def stop(self) -> None:
         """Stop the server (closes its sockets and threads)."""

@@ -51,7 +51,7 @@ if Path(args[0]).name == "train.py":
     while len(views) < vmax:
         step = min(k, vmax - len(views))
         count = step_count(a.method, {pool} - len(views), step, eps)
-        stages.append({{"train_views": list(views), "candidates": {pool} - len(views),
+        stages.append({{"stage": len(stages), "train_views": list(views), "candidates": {pool} - len(views),
                        "selected": list(range(len(views), len(views) + step)), "test_psnr": 10.0,
                        "oracle_calls": {{"conservative": count, "evaluated": count}},
                        "fisher_seconds": 0.0, "select_seconds": 0.0}})
@@ -61,6 +61,7 @@ if Path(args[0]).name == "train.py":
     (model / "selection.json").write_text(json.dumps({{"config": {{"method": a.method, "selector_options": options,
         "views_per_step": k, "seed": int(a.seed)}}, "stages": stages}}))
     (model / "run_status.json").write_text(json.dumps({{"status": "complete", "iteration": int(a.iterations)}}))
+    (model / "cfg_args").write_text(json.dumps({{"method": a.method, "seed": int(a.seed)}}))
 elif Path(args[0]).name == "render.py":
     status = json.loads((model / "run_status.json").read_text())
     rendered = model / "test" / "ours_{{}}".format(status["iteration"])

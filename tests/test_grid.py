@@ -337,8 +337,10 @@ def test_timeout_checkpoints_and_requeues(tmp_path, monkeypatch):
 def test_inline_launcher(tmp_path):
     env, python, data, log = make_fake(tmp_path)
     r = grid("--setup", "ablation_ssg", "--data", str(data), "--out", str(tmp_path / "out"), "--python", str(python),
-             "--methods", "ssg", "--launcher", "inline", "--iter_scale", "0.001", env=env)
+             "--methods", "ssg", "--launcher", "inline", "--iter_scale", "0.001", "--report", env=env)
     assert r.returncode == 0, r.stdout + r.stderr
+    report = tmp_path / "out" / "ablation_ssg" / "report.html"
+    assert f"wrote {report}" in r.stdout and "ssg_eps0.25" in report.read_text()  # --report: the grid report
     assert {p.name for p in (tmp_path / "out" / "ablation_ssg" / "ship").iterdir()} == {
         f"ssg_eps{e}" for e in ("0.1", "0.2", "0.25", "0.4", "0.6")}
     assert {(option(c, "--iters_per_view"), option(c, "--iterations"), option(c, "--views_per_step"))

@@ -61,8 +61,20 @@ def test_run_report_shows_every_camera_stage_metric_and_view(active_model, tmp_p
     out = write_run_report(active_model, tmp_path / "r.html")
     html = out.read_text()
     offline(html)
-    assert html.count("class='zoom'") == 4 * 4 + 1  # 4 test views x (gt, render, error, uncertainty) + colour bar
+    # render.py --uncertainty writes all 3 kinds: 4 test views x (gt, render, error, 3 maps) + 3 colour bars
+    assert html.count("class='zoom'") == 4 * 6 + 3
+    folder = active_model / "test" / "ours_70" / "uncertainty"
+    for kind in ("fisherrf", "fisherrf_view", "position_variance"):
+        assert f"<div class='head'>uncertainty: {kind}</div>" in html
+        assert f"00001.png uncertainty: {kind}" in html and f"colour bar: {kind}" in html
+        assert run.colorbars[kind] == folder / kind / "colorbar.png"
+        assert [g.uncertainty[kind] for g in run.gallery] == [folder / kind / f"{i:05d}.png" for i in range(4)]
     results = json.loads((active_model / "results.json").read_text())["ours_70"]
+    unc_keys = [k for k in results if k.startswith(("Spearman/", "AUSE_"))]
+    assert len(unc_keys) >= 3 * 2 * 2  # Spearman and >= 1 AUSE variant x 3 kinds x (image, object)
+    for key in unc_keys:
+        metric, kind, region = key.split("/")
+        assert f"<tr><td>{metric}</td><td>{kind}</td><td>{region}</td><td>{results[key]:.4f}</td></tr>" in html
     assert f"{results['PSNR']:.2f}" in html and "(squeeze)" in html
     for stage in sel["stages"]:
         assert f"{stage['gains'][0]:.3g}" in html

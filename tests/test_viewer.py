@@ -13,6 +13,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 import torch
 
 from gaussian_renderer.projection import quat_to_rotmat
@@ -86,6 +87,7 @@ def test_viewer_in_browser(active_model):
         close(driver)
 
 
+@pytest.mark.auto_backend  # the viewer renders with the model's settings, as view.py does
 def test_clicking_a_camera_shows_its_image_render_and_uncertainty(active_model):
     from reports.images import open_rgb
     from reports.viewer import Viewer
@@ -95,17 +97,26 @@ def test_clicking_a_camera_shows_its_image_render_and_uncertainty(active_model):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    viewer = Viewer(trained, port)
-    try:
-        assert len(viewer.cameras) == 4 + 14
-        for index, split, i in ((1, "test", 1), (4 + 2, "train", 2)):  # test camera 1, training view 2
-            viewer.show(index)
-            folder = active_model / split / "ours_70"
-            assert viewer.cameras[index].name in viewer.title.content
-            np.testing.assert_array_equal(viewer.images["image"].image, open_rgb(folder / "gt" / f"{i:05d}.png"))
-            diff = viewer.images["render"].image.astype(int) - open_rgb(folder / "renders" / f"{i:05d}.png")
-            assert np.abs(diff).max() <= 1  # render.py's PNG of the same camera (rounding)
-            np.testing.assert_array_equal(viewer.images["uncertainty"].image,
-                                          open_rgb(folder / "uncertainty" / f"{i:05d}.png"))
-    finally:
-        viewer.stop()
+    for kind, shown in ((None, "fisherrf_view"), ("position_variance", "position_variance")):  # None: the default
+        viewer = Viewer(trained, port, kind)
+        try:
+            assert len(viewer.cameras) == 4 + 14
+            for index, split, i in ((1, "test", 1), (4 + 2, "train", 2)):  # test camera 1, training view 2
+                viewer.show(index)
+                folder = active_model / split / "ours_70"
+                assert viewer.cameras[index].name in viewer.title.content
+                np.testing.assert_array_equal(viewer.images["image"].image, open_rgb(folder / "gt" / f"{i:05d}.png"))
+                diff = viewer.images["render"].image.astype(int) - open_rgb(folder / "renders" / f"{i:05d}.png")
+                assert np.abs(diff).max() <= 1  # render.py's PNG of the same camera (rounding)
+                np.testing.assert_array_equal(viewer.images["uncertainty"].image,
+                                              open_rgb(folder / "uncertainty" / shown / f"{i:05d}.png"))
+                assert viewer.images["uncertainty"].label == f"uncertainty: {shown}"
+        finally:
+            viewer.stop()
+
+
+def test_kind_preference_covers_every_map_kind():
+    from active.uncertainty import UNCERTAINTY_KINDS
+    from reports.viewer import KIND_PREFERENCE
+
+    assert sorted(KIND_PREFERENCE) == sorted(UNCERTAINTY_KINDS) == ["fisherrf", "fisherrf_view", "position_variance"]

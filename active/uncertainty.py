@@ -35,7 +35,7 @@ from active.logdet import BlockInformation
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
-from utils.errors import UserError
+from utils.errors import UserError, parse_distinct_choices
 from utils.model_dir import SELECTION, UNCERTAINTY_KINDS
 
 
@@ -68,12 +68,7 @@ COLOUR_GROUPS = ("sh_dc", "sh_rest")
 def parse_uncertainty_kinds(text: str) -> tuple[str, ...]:
     """Comma-separated uncertainty kinds -> a tuple; an empty, repeated or unknown one is a one-line UserError that
     lists the valid kinds."""
-    kinds = tuple(k.strip() for k in text.split(",") if k.strip())
-    bad = [k for k in kinds if k not in UNCERTAINTY_KINDS]
-    if bad or not kinds or len(set(kinds)) != len(kinds):
-        raise UserError(f"--uncertainty_kind {text!r}: give distinct comma-separated kinds from "
-                        f"{', '.join(UNCERTAINTY_KINDS)}" + (f" (unknown: {', '.join(bad)})" if bad else ""))
-    return kinds
+    return parse_distinct_choices(text, UNCERTAINTY_KINDS, "--uncertainty_kind", "kinds")
 
 
 def fisherrf_information(gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],

@@ -99,3 +99,13 @@ def active_model(tiny_scene, tmp_path_factory) -> Path:
         r = run_cli(*args)
         assert r.returncode == 0, r.stderr
     return model
+
+
+@pytest.fixture(scope="module")
+def single_torch_thread():
+    """Tiny batched linear algebra: one torch thread avoids ~ms of thread-pool hand-off per call on a busy machine
+    (a module opts in with `pytestmark = pytest.mark.usefixtures("single_torch_thread")`)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)

@@ -11,13 +11,7 @@ from active.logdet import (BlockGainOracle, BlockInformation, DenseBlockInformat
 from utils.errors import UserError
 
 
-@pytest.fixture(autouse=True, scope="module")
-def single_thread():
-    """Tiny batched linear algebra: one thread avoids ~ms of thread-pool hand-off per call on a busy machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("single_torch_thread")  # tiny batched linear algebra (tests/conftest.py)
 
 
 def random_blocks(count, n, p, seed=0, rank=None):

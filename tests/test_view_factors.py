@@ -20,12 +20,7 @@ SETTINGS = RasterSettings(tile_size=8, chunk_size=8, backend="compiled")
 BG = torch.zeros(3)
 
 
-@pytest.fixture(autouse=True, scope="module")
-def single_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("single_torch_thread")  # tiny batched linear algebra (tests/conftest.py)
 
 
 def model(n=80, seed=3):

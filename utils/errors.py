@@ -20,3 +20,14 @@ def run_cli(main: Callable[[], int | None]) -> None:
         print("error: interrupted", file=sys.stderr)
         sys.exit(130)
     sys.exit(code or 0)
+
+
+def parse_distinct_choices(text: str, valid, flag: str, noun: str) -> tuple[str, ...]:
+    """Comma-separated choices of `flag` -> a tuple; an empty, repeated or unknown one is a one-line UserError that
+    lists the valid `noun` (e.g. "groups", "kinds")."""
+    choices = tuple(c.strip() for c in text.split(",") if c.strip())
+    bad = [c for c in choices if c not in valid]
+    if bad or not choices or len(set(choices)) != len(choices):
+        raise UserError(f"{flag} {text!r}: give distinct comma-separated {noun} from "
+                        f"{', '.join(valid)}" + (f" (unknown: {', '.join(bad)})" if bad else ""))
+    return choices

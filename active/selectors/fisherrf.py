@@ -27,7 +27,7 @@ from active.base import Selection, SelectionContext, Selector, check_k
 from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
-from utils.errors import UserError
+from utils.errors import UserError, parse_distinct_choices
 
 DEFAULT_GROUPS = "means,log_scales,logit_opacities,sh_dc,sh_rest"  # FisherRF's set: every parameter but rotation
 VARIANTS = {"exact": "diagonal", "reference": "diagonal_reference"}  # --fisherrf_variant -> the oracle kind
@@ -35,12 +35,7 @@ VARIANTS = {"exact": "diagonal", "reference": "diagonal_reference"}  # --fisherr
 
 def parse_groups(text: str) -> tuple[str, ...]:
     """Comma-separated raw parameter groups -> a tuple; an empty, repeated or unknown group is one UserError line."""
-    groups = tuple(g.strip() for g in text.split(",") if g.strip())
-    bad = [g for g in groups if g not in RAW_PARAMETER_GROUPS]
-    if bad or not groups or len(set(groups)) != len(groups):
-        raise UserError(f"--fisherrf_params {text!r}: give distinct comma-separated groups from "
-                        f"{', '.join(RAW_PARAMETER_GROUPS)}" + (f" (unknown: {', '.join(bad)})" if bad else ""))
-    return groups
+    return parse_distinct_choices(text, RAW_PARAMETER_GROUPS, "--fisherrf_params", "groups")
 
 
 @dataclass(frozen=True)

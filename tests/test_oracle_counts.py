@@ -11,8 +11,10 @@ from active.base import SelectionContext
 from active.fisher import DiagonalGainOracle
 from active.logdet import BlockGainOracle, BlockInformation
 from active.oracle_counts import exhaustive_count, mean_rounded_up, schedule_counts
-from tests.test_logdet import random_blocks, single_thread  # noqa: F401  (autouse fixture)
+from tests.test_logdet import random_blocks
 from utils.errors import UserError
+
+pytestmark = pytest.mark.usefixtures("single_torch_thread")  # tiny batched linear algebra (tests/conftest.py)
 
 
 def exhaustive(m: int, k: int) -> int:

@@ -11,8 +11,10 @@ from active import build_selector, list_selectors, registry
 from active.base import SelectionContext
 from active.logdet import BlockGainOracle, BlockInformation
 from tests.conftest import ROOT
-from tests.test_logdet import random_blocks, single_thread  # noqa: F401  (autouse fixture)
+from tests.test_logdet import random_blocks
 from utils.errors import UserError
+
+pytestmark = pytest.mark.usefixtures("single_torch_thread")  # tiny batched linear algebra (tests/conftest.py)
 
 
 def docs_example() -> str:

@@ -9,8 +9,10 @@ import torch
 from active import build_selector, list_selectors, register_selector, registry
 from active.base import SelectionContext, Selector
 from active.logdet import BlockGainOracle, BlockInformation
-from tests.test_logdet import random_blocks, single_thread  # noqa: F401  (autouse fixture)
+from tests.test_logdet import random_blocks
 from utils.errors import UserError
+
+pytestmark = pytest.mark.usefixtures("single_torch_thread")  # tiny batched linear algebra (tests/conftest.py)
 
 
 def problem(m=12, n=3, p=2, seed=0):

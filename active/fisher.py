@@ -24,8 +24,8 @@ train.py calls, with the kind the selector declares.
 `FisherOracle.build(...)` returns the one object the selectors call (`gain`, `commit`, `evaluated`: the
 `GainOracle` protocol, by inheritance from `active.logdet.BlockGainOracle`); its `FisherViewBlocks` supplies the
 candidates' information as `fisher_view_factors`: only the Gaussians the view sees (a non-zero attribute Gram), each
-block as the factor R_i = sigma^-1 J_proj,i^T G_i+^1/2 [P, A] (G_i+ = G_i with its roundoff-negative eigenvalues
-clamped: the PSD projection, made once per view), so H_v,i = R_i R_i^T and a gain or commit touches the visible
+block as the factor R_i = sigma^-1 J_proj,i^T C_i [P, A] (C_i C_i^T = G_i+, the PSD part of the attribute Gram, by a
+pivoted Cholesky of the equilibrated Gram in numba, made once per view; `active.logdet.gram_root_factors`), so H_v,i = R_i R_i^T and a gain or commit touches the visible
 blocks only. Factors are stored as float32 (`FACTOR_STORAGE`; arithmetic stays float64). Modes: "cached" keeps each
 candidate's factors for the stage (an oracle is then a log-det update); "streaming" keeps nothing and recomputes a
 view's factors at every oracle (memory-lean). When the cache estimate (the training views' visible counts times the
@@ -42,7 +42,7 @@ from typing import Callable
 
 import torch
 
-from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite
+from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite, gram_root_factors
 from gaussian_renderer import RasterSettings, attribute_gram, project_gaussians, projection_jacobian
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from gaussian_renderer.sh import sh_to_colors
@@ -86,10 +86,12 @@ def fisher_view_blocks(gaussians: GaussianModel, camera: Camera, background: tor
 
 def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
                         settings: RasterSettings, sigma: float = 1.0,
-                        param_groups: tuple[str, ...] = FISHER_PARAM_GROUPS["default"]) -> ViewFactors:
+                        param_groups: tuple[str, ...] = FISHER_PARAM_GROUPS["default"],
+                        backend: str = "auto") -> ViewFactors:
     """`fisher_view_blocks` over the Gaussians the view sees, as PSD factors: H_v,i = R_i R_i^T with
-    R_i = sigma^-1 J_proj,i^T V_i diag(max(lambda_i, 0))^1/2 from the eigen-decomposition G_i = V_i diag(lambda_i) V_i^T
-    of the attribute Gram. The projection Jacobian is computed for the visible Gaussians only.
+    R_i = sigma^-1 J_proj,i^T C_i, C_i C_i^T the PSD part of the attribute Gram G_i (`active.logdet.gram_root_factors`:
+    pivoted Cholesky in numba with `backend` "auto"/"compiled", the eigen-clamping twin with "torch"). The projection
+    Jacobian is computed for the visible Gaussians only.
 
     Returns:
         indices [n] of the Gaussians with a non-zero Gram, factors [n, P, A] float64.
@@ -104,9 +106,8 @@ def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: to
         gram = gram[indices]  # [n, A, A]
         jac = _projection_jacobian(gaussians, camera, param_groups, indices)  # [n, A, P]
         check_finite(jac, "view", gaussians.num_gaussians)
-        evals, evecs = torch.linalg.eigh(gram)  # [n, A], [n, A, A]
-        root = evecs * (evals.clamp_min(0.0).sqrt() / sigma)[:, None, :]  # G+^1/2 / sigma [n, A, A]
-    return ViewFactors(indices, jac.transpose(1, 2) @ root, gaussians.num_gaussians)  # R [n, P, A]
+        factors = gram_root_factors(gram, jac, sigma, backend)  # R [n, P, A]
+    return ViewFactors(indices, factors, gaussians.num_gaussians)
 
 
 def fisher_view_diagonals(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,

@@ -146,6 +146,34 @@ def factor_commit_torch(chol: torch.Tensor, view: ViewFactors) -> torch.Tensor:
     return torch.where(keep, terms, torch.zeros_like(terms))
 
 
+def gram_root_factors_torch(gram: torch.Tensor, jac: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Torch twin of `logdet_kernels.gram_root_factors`: R = sigma^-1 J^T D^1/2 V diag(max(lambda, 0))^1/2 from the
+    eigen-decomposition S = V diag(lambda) V^T of the equilibrated Gram S = D^-1/2 G D^-1/2, D = diag(G) (attributes
+    with a zero diagonal drop out): the PSD part of G, computed where roundoff is relative to each attribute's scale.
+    gram [n, A, A], jac [n, A, P] float64 -> R [n, P, A] float64"""
+    diag = torch.diagonal(gram, dim1=-2, dim2=-1)  # [n, A]
+    root_diag = torch.where(diag > 0, diag.clamp_min(0.0).sqrt(), torch.zeros_like(diag))
+    inv = torch.where(root_diag > 0, 1.0 / root_diag.clamp_min(1e-300), torch.zeros_like(diag))
+    evals, evecs = torch.linalg.eigh(gram * inv[:, :, None] * inv[:, None, :])  # [n, A], [n, A, A]
+    root = root_diag[:, :, None] * evecs * (evals.clamp_min(0.0).sqrt() / sigma)[:, None, :]  # [n, A, A]
+    return jac.transpose(1, 2) @ root
+
+
+def gram_root_factors(gram: torch.Tensor, jac: torch.Tensor, sigma: float, backend: str = "auto") -> torch.Tensor:
+    """The factors R_b [P, A] with R_b R_b^T = sigma^-2 J_b^T G_b+ J_b (G_b+: the PSD part of the attribute Gram): the
+    numba pivoted-Cholesky kernel on the CPU, else (or with backend="torch") the eigen-decomposition twin.
+    gram [n, A, A], jac [n, A, P] float64 -> R [n, P, A] float64"""
+    if not _compiled(backend, gram) or gram.shape[0] == 0:
+        return gram_root_factors_torch(gram, jac, sigma)
+    import numba
+    from active import logdet_kernels
+    threads = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS, gram.shape[0]))
+    numba.set_num_threads(threads)
+    out = logdet_kernels.gram_root_factors(gram.double().contiguous().numpy(), jac.double().contiguous().numpy(),
+                                           1.0 / sigma, threads)
+    return torch.from_numpy(out)
+
+
 def _compiled(backend: str, tensor: torch.Tensor) -> bool:
     """Whether the numba kernels run: CPU tensors and numba importable ("compiled" without numba is an error, "auto"
     then takes the torch twin)."""

@@ -126,3 +126,78 @@ def commit(chol, indices, factors, num_slices):
                 for c in range(a + 1):
                     chol[i, a, c] = out[a, c]
     return terms
+
+
+PIVOT_TOLERANCE = 2.220446049250313e-16  # float64 epsilon: a pivot <= A * eps * max diag(G) ends the factorisation
+
+
+@njit(parallel=True, cache=True)
+def gram_root_factors(gram, jac, scale, num_slices):
+    """R_b = scale J_b^T C_b [P, A] with C_b C_b^T the PSD part of the attribute Gram G_b, by pivoted Cholesky.
+
+    G_b is first equilibrated, S = D^-1/2 G_b D^-1/2 with D = diag(G_b) (the nine attributes differ by orders of
+    magnitude in their units; attributes with a zero diagonal drop out), then factored by Cholesky with diagonal
+    pivoting (largest remaining diagonal first), stopping at rank k when every remaining pivot is <= A eps, LAPACK
+    pstrf's default tolerance: what is dropped is the roundoff-level (possibly negative) part of a Gram that is PSD in
+    exact arithmetic, as the eigen-clamping twin (`active.logdet.gram_root_factors_torch`, on the same S) drops its
+    negative eigenvalues. C_b = D^1/2 Pi C_S. Its columns are another orthonormal mix of those of the eigen root, so
+    R_b R_b^T (all a gain uses) agrees with the twin to roundoff.
+
+    Args:
+        gram: G, float64. [n, A, A]
+        jac: projection Jacobian d a / d theta, float64. [n, A, P]
+        scale: 1 / sigma.
+        num_slices: contiguous slices of blocks, one per thread.
+    Returns:
+        R, float64 (columns past the rank are 0). [n, P, A]
+    """
+    n, a, p = jac.shape
+    out = np.zeros((n, p, a))
+    per = (n + num_slices - 1) // num_slices
+    for s in prange(num_slices):
+        w = np.empty((a, a))
+        c = np.empty((a, a))
+        perm = np.empty(a, np.int64)
+        root_diag = np.empty(a)
+        for b in range(s * per, min(n, (s + 1) * per)):
+            for i in range(a):  # equilibrate: S = D^-1/2 G D^-1/2 has a unit diagonal (attributes differ in units)
+                perm[i] = i
+                root_diag[i] = math.sqrt(gram[b, i, i]) if gram[b, i, i] > 0.0 else 0.0
+            for i in range(a):
+                for j in range(a):
+                    c[i, j] = 0.0
+                    den = root_diag[i] * root_diag[j]
+                    w[i, j] = gram[b, i, j] / den if den > 0.0 else 0.0
+            tol = a * PIVOT_TOLERANCE
+            rank = 0
+            for k in range(a):
+                q, best = k, w[k, k]
+                for i in range(k + 1, a):
+                    if w[i, i] > best:
+                        q, best = i, w[i, i]
+                if not best > tol:
+                    break
+                if q != k:  # symmetric swap of rows and columns k, q; the rows of C computed so far follow
+                    for j in range(a):
+                        w[k, j], w[q, j] = w[q, j], w[k, j]
+                    for j in range(a):
+                        w[j, k], w[j, q] = w[j, q], w[j, k]
+                    for j in range(k):
+                        c[k, j], c[q, j] = c[q, j], c[k, j]
+                    perm[k], perm[q] = perm[q], perm[k]
+                d = math.sqrt(w[k, k])
+                c[k, k] = d
+                for i in range(k + 1, a):
+                    c[i, k] = w[i, k] / d
+                for i in range(k + 1, a):  # Schur complement
+                    for j in range(k + 1, i + 1):
+                        w[i, j] -= c[i, k] * c[j, k]
+                        w[j, i] = w[i, j]
+                rank = k + 1
+            for row in range(p):  # R = scale J^T D^1/2 (Pi C): C's row i belongs to attribute perm[i]
+                for k in range(rank):
+                    acc = 0.0
+                    for i in range(k, a):
+                        acc += jac[b, perm[i], row] * root_diag[perm[i]] * c[i, k]
+                    out[b, row, k] = scale * acc
+    return out

@@ -215,7 +215,8 @@ def test_compiled_kernels_equal_torch_twin_per_block():
     for info, growth in zip((compiled, twin), added):  # a commit's terms are the log-det growth, == the gain
         assert math.isclose(growth, info.rho(), rel_tol=1e-10)
     assert math.isclose(added[0], float(BlockInformation(prior).gain(view)), rel_tol=1e-10)
-    torch.testing.assert_close(compiled.chol, twin.chol, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(compiled.chol, twin.chol, rtol=1e-10, atol=1e-10)
+    # ^ entries of order 1-100 summed in another order: ~1e-11 absolute seen
     torch.testing.assert_close(compiled.matrix, twin.matrix, rtol=1e-12, atol=1e-10)
 
 

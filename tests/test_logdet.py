@@ -6,7 +6,7 @@ import math
 import pytest
 import torch
 
-from active.logdet import (BlockGainOracle, BlockInformation, DenseBlockInformation, ViewFactors,
+from active.logdet import (BlockGainOracle, check_finite, BlockInformation, DenseBlockInformation, ViewFactors,
                            logdet_identity_plus)
 from utils.errors import UserError
 
@@ -242,3 +242,16 @@ def test_view_factors_refuse_non_finite_and_scatter_to_dense():
     expected[[1, 4]] = 2.0  # R R^T of an all-ones 3 x 2 factor
     assert torch.equal(view.dense(), expected)
     assert view.stored_as(torch.float32).nbytes == 2 * 8 + 2 * 3 * 2 * 4
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_check_finite_catches_every_non_finite_and_not_an_overflowing_sum(dtype):
+    """check_finite sums first: a NaN/inf anywhere must still be caught, finite values whose sum overflows must not."""
+    huge = torch.full((64,), torch.finfo(dtype).max / 2, dtype=dtype)
+    check_finite(huge, "view", 64)  # the sum is inf, every element finite: no error
+    for bad in (float("nan"), float("inf"), -float("inf")):
+        for where in (0, 63):
+            values = torch.ones(64, dtype=dtype)
+            values[where] = bad
+            with pytest.raises(UserError, match="NaN or inf"):
+                check_finite(values, "view", 64)

@@ -25,8 +25,8 @@ train.py calls, with the kind the selector declares.
 `GainOracle` protocol, by inheritance from `active.logdet.BlockGainOracle`); its `FisherViewBlocks` supplies the
 candidates' information as `fisher_view_factors`: only the Gaussians the view sees (a non-zero attribute Gram), each
 block as the factor R_i = sigma^-1 J_proj,i^T C_i [P, A] (C_i C_i^T = G_i+, the PSD part of the attribute Gram, by a
-pivoted Cholesky of the equilibrated Gram in numba, made once per view; `active.logdet.gram_root_factors`), so H_v,i = R_i R_i^T and a gain or commit touches the visible
-blocks only. Factors are stored as float32 (`FACTOR_STORAGE`; arithmetic stays float64). Modes: "cached" keeps each
+pivoted Cholesky of the equilibrated Gram in numba, made once per view; `active.logdet.gram_root_factors`), so
+H_v,i = R_i R_i^T and a gain or commit touches the visible blocks only. Factors are stored as float32 (`FACTOR_STORAGE`; arithmetic stays float64). Modes: "cached" keeps each
 candidate's factors for the stage (an oracle is then a log-det update); "streaming" keeps nothing and recomputes a
 view's factors at every oracle (memory-lean). When the cache estimate (the training views' visible counts times the
 candidates) exceeds the memory budget, one view alone does not fit it, or the device runs out of memory while

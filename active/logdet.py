@@ -155,9 +155,8 @@ def gram_root_factors_torch(gram: torch.Tensor, jac: torch.Tensor, sigma: float)
     eigen-decomposition S = V diag(lambda) V^T of the equilibrated Gram S = D^-1/2 G D^-1/2, D = diag(G) (attributes
     with a zero diagonal drop out): the PSD part of G, computed where roundoff is relative to each attribute's scale.
     gram [n, A, A], jac [n, A, P] float64 -> R [n, P, A] float64"""
-    diag = torch.diagonal(gram, dim1=-2, dim2=-1)  # [n, A]
-    root_diag = torch.where(diag > 0, diag.clamp_min(0.0).sqrt(), torch.zeros_like(diag))
-    inv = torch.where(root_diag > 0, 1.0 / root_diag.clamp_min(1e-300), torch.zeros_like(diag))
+    root_diag = torch.diagonal(gram, dim1=-2, dim2=-1).clamp_min(0.0).sqrt()  # D^1/2 [n, A]
+    inv = torch.where(root_diag > 0, 1.0 / root_diag.clamp_min(1e-300), torch.zeros_like(root_diag))
     evals, evecs = torch.linalg.eigh(gram * inv[:, :, None] * inv[:, None, :])  # [n, A], [n, A, A]
     root = root_diag[:, :, None] * evecs * (evals.clamp_min(0.0).sqrt() / sigma)[:, None, :]  # [n, A, A]
     return jac.transpose(1, 2) @ root
@@ -169,12 +168,9 @@ def gram_root_factors(gram: torch.Tensor, jac: torch.Tensor, sigma: float, backe
     gram [n, A, A], jac [n, A, P] float64 -> R [n, P, A] float64"""
     if not _compiled(backend, gram) or gram.shape[0] == 0:
         return gram_root_factors_torch(gram, jac, sigma)
-    import numba
     from active import logdet_kernels
-    threads = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS, gram.shape[0]))
-    numba.set_num_threads(threads)
     out = logdet_kernels.gram_root_factors(gram.double().contiguous().numpy(), jac.double().contiguous().numpy(),
-                                           1.0 / sigma, threads)
+                                           1.0 / sigma, _kernel_threads(gram.shape[0]))
     return torch.from_numpy(out)
 
 
@@ -192,11 +188,18 @@ def _compiled(backend: str, tensor: torch.Tensor) -> bool:
     return error is None
 
 
+def _kernel_threads(num_blocks: int) -> int:
+    """Sets numba's thread count for a `logdet_kernels` call over `num_blocks` blocks (torch's count, at most one per
+    block) and returns it as the kernel's slice count."""
+    import numba
+    threads = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS, num_blocks))
+    numba.set_num_threads(threads)
+    return threads
+
+
 def _kernel_args(chol: torch.Tensor, view: ViewFactors) -> tuple:
     """numpy views of (L, indices, factors) and the thread slice count for `logdet_kernels`."""
-    import numba
-    threads = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS, view.indices.shape[0]))
-    numba.set_num_threads(threads)
+    threads = _kernel_threads(view.indices.shape[0])
     return chol.numpy(), view.indices.contiguous().numpy(), view.factors.contiguous().numpy(), threads
 
 

@@ -128,7 +128,7 @@ def commit(chol, indices, factors, num_slices):
     return terms
 
 
-PIVOT_TOLERANCE = 2.220446049250313e-16  # float64 epsilon: a pivot <= A * eps * max diag(G) ends the factorisation
+PIVOT_TOLERANCE = 2.220446049250313e-16  # float64 epsilon: a pivot <= A eps of the unit-diagonal S ends the factorisation
 
 
 @njit(parallel=True, cache=True)
@@ -154,6 +154,7 @@ def gram_root_factors(gram, jac, scale, num_slices):
     n, a, p = jac.shape
     out = np.zeros((n, p, a))
     per = (n + num_slices - 1) // num_slices
+    tol = a * PIVOT_TOLERANCE
     for s in prange(num_slices):
         w = np.empty((a, a))
         c = np.empty((a, a))
@@ -168,7 +169,6 @@ def gram_root_factors(gram, jac, scale, num_slices):
                     c[i, j] = 0.0
                     den = root_diag[i] * root_diag[j]
                     w[i, j] = gram[b, i, j] / den if den > 0.0 else 0.0
-            tol = a * PIVOT_TOLERANCE
             rank = 0
             for k in range(a):
                 q, best = k, w[k, k]
@@ -194,10 +194,13 @@ def gram_root_factors(gram, jac, scale, num_slices):
                         w[i, j] -= c[i, k] * c[j, k]
                         w[j, i] = w[i, j]
                 rank = k + 1
-            for row in range(p):  # R = scale J^T D^1/2 (Pi C): C's row i belongs to attribute perm[i]
+            for i in range(a):  # C_G = D^1/2 Pi C: C's row i belongs to attribute perm[i]
+                for k in range(min(i + 1, rank)):
+                    c[i, k] *= root_diag[perm[i]]
+            for row in range(p):  # R = scale J^T C_G
                 for k in range(rank):
                     acc = 0.0
                     for i in range(k, a):
-                        acc += jac[b, perm[i], row] * root_diag[perm[i]] * c[i, k]
+                        acc += jac[b, perm[i], row] * c[i, k]
                     out[b, row, k] = scale * acc
     return out

@@ -14,7 +14,7 @@ A, P = 9, 14
 def random_grams(n: int, rank: int, seed: int, orders: float = 8.0) -> tuple[torch.Tensor, torch.Tensor]:
     """Grams G = B B^T of the given rank, attributes scaled over `orders` orders of magnitude, and a Jacobian."""
     gen = torch.Generator().manual_seed(seed)
-    units = 10.0 ** torch.linspace(-orders / 2, orders / 2, A, dtype=torch.float64)  # [A]: px, px^2, opacity, colour ... differ
+    units = 10.0 ** torch.linspace(-orders / 2, orders / 2, A, dtype=torch.float64)  # [A], as px, px^2, colour differ
     b = torch.randn(n, A, rank, generator=gen, dtype=torch.float64) * units[None, :, None]
     gram = b @ b.transpose(1, 2)  # [n, A, A]
     jac = torch.randn(n, A, P, generator=gen, dtype=torch.float64) / units[None, :, None]

@@ -104,7 +104,7 @@ def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: to
         indices = torch.nonzero(gram.flatten(1).abs().amax(dim=1) > 0).flatten() if gram.shape[0] else \
             torch.zeros(0, dtype=torch.long, device=gram.device)  # [n]
         gram = gram[indices]  # [n, A, A]
-        jac = _projection_jacobian(gaussians, camera, param_groups, indices)  # [n, A, P]
+        jac = _projection_jacobian(gaussians, camera, param_groups, settings.backend, indices)  # [n, A, P]
         check_finite(jac, "view", gaussians.num_gaussians)
         factors = gram_root_factors(gram, jac, sigma, backend)  # R [n, P, A]
     return ViewFactors(indices, factors, gaussians.num_gaussians)
@@ -191,7 +191,7 @@ def _jacobian_and_gram(gaussians: GaussianModel, camera: Camera, background: tor
     """J_proj [N, A, P] and G [N, A, A] of one view, float64."""
     with torch.no_grad():
         gram = _attribute_gram(gaussians, camera, background, settings)
-    return _projection_jacobian(gaussians, camera, param_groups), gram
+    return _projection_jacobian(gaussians, camera, param_groups, settings.backend), gram
 
 
 def _attribute_gram(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
@@ -204,15 +204,16 @@ def _attribute_gram(gaussians: GaussianModel, camera: Camera, background: torch.
                           camera.width, camera.height, background, settings)
 
 
-def _projection_jacobian(gaussians: GaussianModel, camera: Camera, param_groups: tuple[str, ...],
+def _projection_jacobian(gaussians: GaussianModel, camera: Camera, param_groups: tuple[str, ...], backend: str,
                          indices: torch.Tensor | None = None) -> torch.Tensor:
-    """J_proj [N, A, P] float64 of every Gaussian, or [n, A, P] of `indices` (Gaussians are independent)."""
+    """J_proj [N, A, P] float64 of every Gaussian, or [n, A, P] of `indices` (Gaussians are independent), by the
+    rasterizer `backend`'s path (`projection_jacobian`: the numba kernel on CPU with "auto"/"compiled")."""
     pick = (lambda t: t.detach()) if indices is None else (lambda t: t.detach()[indices])
     params = gaussians.params
     return projection_jacobian(pick(params["means"]), pick(params["quats"]), pick(params["log_scales"]),
                                pick(params["logit_opacities"]), pick(gaussians.sh_coeffs), gaussians.active_sh_degree,
                                camera.viewmat, camera.intrinsics, camera.width, camera.height,
-                               param_groups=param_groups).double()
+                               param_groups=param_groups, backend=backend).double()
 
 
 @dataclass

@@ -131,7 +131,7 @@ def projection_jacobian(means: torch.Tensor, quats: torch.Tensor, log_scales: to
                         logit_opacities: torch.Tensor, sh_coeffs: torch.Tensor, sh_degree: int,
                         viewmat: torch.Tensor, intrinsics: torch.Tensor, width: int, height: int,
                         param_groups: tuple[str, ...] = ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
-                        ) -> torch.Tensor:
+                        backend: str = "torch") -> torch.Tensor:
     """Jacobian of each Gaussian's 2D attributes w.r.t. its own raw parameters, in closed form.
 
     2D attributes (A = 9): mean2d x, y, conic a, b, c, opacity, colour RGB. Raw parameters, in `param_groups`
@@ -145,10 +145,17 @@ def projection_jacobian(means: torch.Tensor, quats: torch.Tensor, log_scales: to
         sh_degree: active SH degree for the colour; viewmat [4, 4], intrinsics [4], width, height: the camera.
         param_groups: which raw parameters form the columns, a subsequence of
             ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest") in any order.
+        backend: a rasterizer backend (`RasterSettings.backend`): "torch" = the batched torch formulas
+            (`projection_partials`), "compiled"/"auto" = the numba kernel (`compiled.projection_kernels`) on CPU
+            tensors, which computes in float64.
     Returns:
-        J, in the dtype of `means`. [N, A, P]
+        J, in the dtype of `means` (torch) or float64 (compiled). [N, A, P]
     """
     _check_jacobian_inputs(means, log_scales, logit_opacities, sh_coeffs, sh_degree, param_groups)
+    if use_compiled(backend, means):
+        from gaussian_renderer.compiled.ops import projection_jacobian_compiled
+        return projection_jacobian_compiled(means, quats, log_scales, logit_opacities, sh_coeffs, sh_degree, viewmat,
+                                            intrinsics, width, height, param_groups)
     blocks = projection_jacobian_closed_form(means, quats, log_scales, logit_opacities, sh_coeffs, sh_degree, viewmat,
                                              intrinsics, width, height, param_groups)
     return torch.cat([blocks[g] for g in param_groups], dim=2)

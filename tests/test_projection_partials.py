@@ -1,7 +1,9 @@
-"""Closed-form projection Jacobian (`projection_jacobian`) vs its autograd twin (`projection_jacobian_autograd`)."""
+"""Closed-form projection Jacobian (`projection_jacobian`) vs its autograd twin (`projection_jacobian_autograd`), for
+both closed-form paths: the batched torch formulas (backend "torch") and the numba kernel (backend "compiled")."""
 import pytest
 import torch
 
+from gaussian_renderer.compiled import numba_import_error
 from gaussian_renderer.fisher_partials import projection_jacobian, projection_jacobian_autograd
 from tests.scenes import intrinsics_for, look_at_viewmat, random_gaussians
 
@@ -23,15 +25,35 @@ def scene(degree):
     return p
 
 
+BACKENDS = ["torch", pytest.param("compiled", marks=pytest.mark.skipif(numba_import_error() is not None,
+                                                                     reason="numba is not importable"))]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("degree", [0, 1, 2, 3])
-@pytest.mark.parametrize("groups", [ALL, ("sh_rest", "log_scales", "means")])
-def test_closed_form_matches_autograd(degree, groups):
+@pytest.mark.parametrize("groups", [ALL, ("sh_rest", "log_scales", "means"), ("logit_opacities", "quats", "sh_dc")])
+def test_closed_form_matches_autograd(backend, degree, groups):
     p = scene(degree)
     args = (p["means"], p["quats"], p["log_scales"], p["logit_opacities"], p["sh_coeffs"], degree, VIEW, K, W, H,
             groups)
-    fast, twin = projection_jacobian(*args), projection_jacobian_autograd(*args)
+    fast, twin = projection_jacobian(*args, backend=backend), projection_jacobian_autograd(*args)
     assert fast.shape == twin.shape and fast.dtype == twin.dtype
     torch.testing.assert_close(fast, twin, rtol=1e-10, atol=1e-10 * twin.abs().max().item())  # float64 rounding
+
+
+@pytest.mark.skipif(numba_import_error() is not None, reason="numba is not importable")
+@pytest.mark.parametrize("degree", [0, 3])
+def test_compiled_matches_torch_closed_form_on_many_gaussians(degree):
+    """The kernel's slices (one per thread) against the batched formulas, culled rows included, float32 inputs: the
+    kernel computes in float64, so it matches the torch path run on the same values in float64."""
+    p = random_gaussians(2000, seed=5, sh_degree=degree, scale=0.3)
+    p32 = {k: v.float() for k, v in p.items()}
+    args = [p32[k] for k in ("means", "quats", "log_scales", "logit_opacities", "sh_coeffs")]
+    fast = projection_jacobian(*args, degree, VIEW.float(), K.float(), W, H, ALL, backend="compiled")
+    twin = projection_jacobian(*(a.double() for a in args), degree, VIEW.float().double(), K.float().double(), W, H,
+                               ALL, backend="torch")
+    assert fast.dtype == torch.float64 and fast.shape == twin.shape
+    torch.testing.assert_close(fast, twin, rtol=1e-9, atol=1e-9 * twin.abs().max().item())
 
 
 def test_awkward_cases_are_exercised():

@@ -162,3 +162,36 @@ def attribute_gram_compiled(means2d: torch.Tensor, conics: torch.Tensor, opaciti
     sums = kernels.gram(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height, settings),
                         trans.numpy(), last.numpy(), pixel_weights, _use_torch_threads())  # [N, 15 + 6 D + 1]
     return torch.from_numpy(kernels.assemble_gram(sums, _float64(conics), _float64(opacities), d))
+
+
+# raw parameter groups and their widths in the Jacobian's columns (sh_rest: 3 (K - 1)), as `projection_kernels`
+_JACOBIAN_GROUPS = ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest")
+
+
+@torch.no_grad()
+def projection_jacobian_compiled(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
+                                 logit_opacities: torch.Tensor, sh_coeffs: torch.Tensor, sh_degree: int,
+                                 viewmat: torch.Tensor, intrinsics: torch.Tensor, width: int, height: int,
+                                 param_groups: tuple[str, ...], near_plane: float = 0.01,
+                                 dilation: float = 0.3) -> torch.Tensor:
+    """`projection_partials.projection_jacobian_closed_form` by the numba kernel, its columns concatenated in
+    `param_groups` order: float64 [N, 9, P] (the kernel computes in float64 whatever the input dtype)."""
+    from gaussian_renderer.compiled import projection_kernels
+    from gaussian_renderer.projection import camera_center, frustum_limits
+
+    k_all = sh_coeffs.shape[1]
+    widths = {"means": 3, "quats": 4, "log_scales": 3, "logit_opacities": 1, "sh_dc": 3, "sh_rest": 3 * (k_all - 1)}
+    cols, total = np.full(len(_JACOBIAN_GROUPS), -1, np.int64), 0
+    for group in param_groups:
+        cols[_JACOBIAN_GROUPS.index(group)] = total
+        total += widths[group]
+    view = viewmat.detach().double()
+    intr = intrinsics.detach().double()
+    (neg_x, pos_x), (neg_y, pos_y) = frustum_limits(*intr.unbind(-1), width, height)
+    limits = torch.stack([neg_x, pos_x, neg_y, pos_y])
+    out = np.zeros((means.shape[0], 9, total))
+    projection_kernels.projection_jacobian_kernel(
+        _float64(means), _float64(quats), _float64(log_scales), _float64(logit_opacities), _float64(sh_coeffs),
+        sh_degree, _numpy(view[:3, :3]), _numpy(view[:3, 3]), _float64(camera_center(view)), _numpy(intr),
+        _numpy(limits), float(near_plane), float(dilation), cols, out, _use_torch_threads())
+    return torch.from_numpy(out)

@@ -35,6 +35,9 @@ class ModelConfig:
     eval: bool = field(default=False, metadata=_flag(None, "hold out test views (COLMAP, transforms.json: every 8th; Blender: transforms_test)"))
     sh_degree: int = field(default=3, metadata=_flag(None, "maximum spherical-harmonics degree"))
     num_random_points: int = field(default=10_000, metadata=_flag(None, "random initial points when the dataset has none (Blender; transforms.json without a point file)"))
+    init_ply: str = field(default="", metadata=_flag(
+        None, "start from the Gaussians of a 3DGS PLY (e.g. a trained model's point_cloud.ply, to continue it on more "
+        "views) instead of the dataset's initial points"))
     device: str = field(default="cpu", metadata=_flag(None, "torch device", ("cpu", "cuda")))
     cpu_max_width: int = field(default=200, metadata=_flag(
         None, "without -r, a CPU run trains on images at most this many px wide (downscale 2/4/8, else this width)"))

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import random
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import torch
@@ -12,6 +13,7 @@ from scene.scene import Scene
 from training.config import TrainConfig
 from training.densify import DensifyStrategy
 from training.optim import create_optimizer
+from utils.errors import UserError
 from utils.seeding import rng_state
 
 
@@ -30,11 +32,27 @@ class TrainState:
 
 
 def fresh_state(scene: Scene, cfg: TrainConfig, train_views: list[int], total_iterations: int) -> TrainState:
-    """A new model from the scene's initial point cloud (seeded by --seed), its optimiser and densification."""
-    pcd = scene.initial_point_cloud(cfg.model.num_random_points, cfg.run.seed)
-    gaussians = scene.new_gaussians(pcd, cfg.model.sh_degree, cfg.model.device)
+    """A new model from the scene's initial point cloud (seeded by --seed) or from --init_ply, its optimiser and
+    densification."""
+    if cfg.model.init_ply:
+        gaussians = initial_gaussians_from_ply(cfg.model.init_ply, cfg.model.sh_degree, cfg.model.device)
+    else:
+        pcd = scene.initial_point_cloud(cfg.model.num_random_points, cfg.run.seed)
+        gaussians = scene.new_gaussians(pcd, cfg.model.sh_degree, cfg.model.device)
     optimizer = create_optimizer(gaussians, cfg.optim, scene.extent)
     return TrainState(gaussians, optimizer, DensifyStrategy(cfg.densify, total_iterations), train_views=list(train_views))
+
+
+def initial_gaussians_from_ply(path: str, sh_degree: int, device: str) -> GaussianModel:
+    """The Gaussians of a 3DGS PLY as a run's starting model, every SH band it holds active (as 3DGS loads a PLY)."""
+    if not Path(path).is_file():
+        raise UserError(f"--init_ply {path} does not exist; pass a 3DGS point_cloud.ply (e.g. "
+                        "MODEL/point_cloud/iteration_N/point_cloud.ply)")
+    gaussians = GaussianModel.load_ply(path, device=device)
+    if gaussians.max_sh_degree != sh_degree:
+        raise UserError(f"--init_ply {path} holds SH degree {gaussians.max_sh_degree}, but --sh_degree is {sh_degree}; "
+                        f"pass --sh_degree {gaussians.max_sh_degree}")
+    return gaussians
 
 
 def capture_state(state: TrainState, rng: random.Random, cfg: TrainConfig) -> dict[str, Any]:

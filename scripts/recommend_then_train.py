@@ -1,0 +1,170 @@
+"""Recommend the next views from poses alone, then train on them: recommend.py against random and coverage picks.
+
+On a Blender dataset (default: lego): train a model on S seed views (farthest-point sampling, as train.py seeds), in a
+folder that holds only those S training images and the test images; rank the other training views by their *poses*
+(a transforms file whose images are not in that folder, so no candidate image can be read) with recommend.py for each
+method and seed; then continue training the S-view model (`train.py --init_ply`) on the S + K views, the same
+iterations for every method, and record the test PSNR. Method "none" continues on the S views alone (the reference).
+
+    python scripts/recommend_then_train.py --data ../shared/data/lego --methods lite_gs coverage random none \
+        --seeds 0 1 2 -o output/recommend_then_train
+
+Writes OUT/results.json (per method and seed: picks as dataset view ids, oracle counts, seconds, test PSNR) and
+OUT/summary.md (per-seed table, mean +- std). Finished steps are reused when the script is run again.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from active.schedule import farthest_point_views
+from scene.pose_files import read_pose_file
+from utils import model_dir
+from utils.errors import UserError, run_cli
+from utils.io import write_json
+
+ROOT = Path(__file__).resolve().parents[1]
+THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+def make_seed_dataset(data: Path, out: Path, num_seed: int) -> tuple[list[int], list[int]]:
+    """OUT/data: transforms_train.json with the `num_seed` seed frames, the test split, links to those images only,
+    and candidates.json (the other training frames, whose images are not linked). Returns (seed ids, candidate ids)
+    as indices of DATA/transforms_train.json."""
+    train = json.loads((data / "transforms_train.json").read_text())
+    test = json.loads((data / "transforms_test.json").read_text())
+    frames = train["frames"]
+    centers = torch.stack([c.camera_center for c in read_pose_file(data / "transforms_train.json",
+                                                                   default_size=(800, 800))])
+    seeds = farthest_point_views(centers.double(), num_seed)
+    candidates = [v for v in range(len(frames)) if v not in seeds]
+    folder = out / "data"
+    for frame in [frames[v] for v in seeds] + test["frames"]:
+        for ext in (".png", ".jpg", ""):
+            src = data / (frame["file_path"] + ext)
+            if src.is_file():
+                dst = folder / (frame["file_path"] + ext)
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                if not dst.exists():
+                    dst.symlink_to(src.resolve())
+                break
+        else:
+            raise UserError(f"{data}: no image for frame {frame['file_path']!r}")
+    write_json(folder / "transforms_train.json", {**train, "frames": [frames[v] for v in seeds]})
+    write_json(folder / "transforms_test.json", test)
+    write_json(folder / "candidates.json", {**train, "frames": [frames[v] for v in candidates]})
+    present = [v for v in candidates if any((folder / (frames[v]["file_path"] + e)).exists() for e in (".png", ""))]
+    if present:
+        raise UserError(f"{folder}: candidate images are present ({present[:5]}); remove them")
+    return seeds, candidates
+
+
+def run(cmd: list[str], threads: int, log: Path) -> float:
+    """Run one CLI of the project with `threads` threads; its output goes to `log`. Returns the wall seconds."""
+    env = {**os.environ, **{v: str(threads) for v in THREAD_VARS}}
+    t0 = time.perf_counter()
+    with open(log, "w") as fh:
+        proc = subprocess.run([sys.executable, *cmd], cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT)
+    if proc.returncode != 0:
+        tail = "".join(log.read_text().splitlines(keepends=True)[-5:])
+        raise UserError(f"{' '.join(cmd[:2])} failed (log {log}):\n{tail}")
+    return time.perf_counter() - t0
+
+
+def is_complete(model: Path) -> bool:
+    status = model / model_dir.RUN_STATUS
+    return status.is_file() and json.loads(status.read_text()).get("status") == "complete"
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", default="../shared/data/lego", help="Blender dataset (transforms_train/test.json)")
+    p.add_argument("-o", "--output", default="output/recommend_then_train")
+    p.add_argument("--methods", nargs="+", default=["lite_gs", "coverage", "random", "none"],
+                   help="recommend.py selectors, and 'none' (no new views)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    p.add_argument("--num_seed_views", type=int, default=5)
+    p.add_argument("-k", type=int, default=4)
+    p.add_argument("-r", "--resolution", default="8")
+    p.add_argument("--base_iterations", type=int, default=1000, help="training of the seed-view model")
+    p.add_argument("--iterations", type=int, default=1800, help="training continued on the seed + K views")
+    p.add_argument("--threads", type=int, default=2)
+    args = p.parse_args()
+    data, out = Path(args.data), Path(args.output)
+    if not (data / "transforms_train.json").is_file() or not (data / "transforms_test.json").is_file():
+        raise UserError(f"{data} is not a Blender dataset with transforms_train.json and transforms_test.json")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "logs").mkdir(exist_ok=True)
+    seeds, candidates = make_seed_dataset(data, out, args.num_seed_views)
+    print(f"seed views {seeds}; {len(candidates)} candidate poses in {out / 'data' / 'candidates.json'} "
+          "(their images are not in that folder)")
+    common = ["-r", args.resolution, "--eval", "-w", "-q"]
+    base = out / "base"
+    if not is_complete(base):
+        secs = run(["train.py", "-s", str(out / "data"), "-m", str(base), "--iterations", str(args.base_iterations),
+                    "--overwrite", *common], args.threads, out / "logs" / "base.log")
+        print(f"base model on {len(seeds)} views: {secs:.0f} s")
+    base_status = json.loads((base / model_dir.RUN_STATUS).read_text())
+    base_ply = model_dir.point_cloud_ply(base, args.base_iterations)
+    results_path = out / "results.json"
+    results = json.loads(results_path.read_text()) if results_path.is_file() else {}
+    results["settings"] = {**vars(args), "seed_views": seeds, "candidates": len(candidates),
+                           "base_test_psnr": base_status["test_psnr"]}
+    for method in args.methods:
+        for seed in args.seeds:
+            key = f"{method}/seed{seed}"
+            row = results.get(key, {})
+            if method != "none" and "picks" not in row:
+                rec_dir = out / "recommend" / f"{method}_seed{seed}"
+                secs = run(["recommend.py", "-m", str(base), "--candidates", str(out / "data" / "candidates.json"),
+                            "-k", str(args.k), "--method", method, "--seed", str(seed), "-o", str(rec_dir),
+                            "--quiet", "--no_previews"], args.threads, out / "logs" / f"recommend_{method}_{seed}.log")
+                rec = json.loads((rec_dir / "recommendations.json").read_text())
+                row = {"picks": [candidates[pick["candidate"]] for pick in rec["picks"]],
+                       "oracle_calls": rec["oracle_calls"], "recommend_seconds": secs}
+            views = seeds + row.get("picks", [])
+            model = out / "continue" / f"{method}_seed{seed}"
+            if "test_psnr" not in row or not is_complete(model):
+                row["train_seconds"] = run(
+                    ["train.py", "-s", str(data), "-m", str(model), "--method", "random", "--init_views",
+                     *map(str, views), "--max_views", str(len(views)), "--views_per_step", str(args.k),
+                     "--iterations", str(args.iterations), "--init_ply", str(base_ply), "--seed", str(seed),
+                     "--overwrite", *common], args.threads, out / "logs" / f"continue_{method}_{seed}.log")
+                row["test_psnr"] = json.loads((model / model_dir.RUN_STATUS).read_text())["test_psnr"]
+            results[key] = row
+            write_json(results_path, results)
+            print(f"{key}: views {views} -> test PSNR {row['test_psnr']:.2f} dB")
+    (out / "summary.md").write_text(summary_table(results, args.methods, args.seeds))
+    print((out / "summary.md").read_text())
+
+
+def summary_table(results: dict, methods: list[str], seeds: list[int]) -> str:
+    """Per-seed test PSNR and mean +- std per method, with the picks and oracle counts."""
+    s = results["settings"]
+    lines = [f"Seed views {s['seed_views']} ({s['base_iterations']} iterations: base test PSNR "
+             f"{s['base_test_psnr']:.2f} dB); +{s['k']} views from {s['candidates']} candidate poses, then "
+             f"{s['iterations']} iterations from the base model (`--init_ply`), -r {s['resolution']}.", "",
+             "| added views from | " + " | ".join(f"seed {x}" for x in seeds) + " | mean ± std | picks (seed "
+             f"{seeds[0]}) | oracles evaluated / conservative |",
+             "|---|" + "---|" * len(seeds) + "---|---|---|"]
+    for m in methods:
+        rows = [results[f"{m}/seed{x}"] for x in seeds]
+        values = [r["test_psnr"] for r in rows]
+        spread = statistics.stdev(values) if len(values) > 1 else 0.0
+        calls = rows[0].get("oracle_calls")
+        lines.append(f"| {m} | " + " | ".join(f"{v:.2f}" for v in values)
+                     + f" | {statistics.mean(values):.2f} ± {spread:.2f} | {rows[0].get('picks', '–')} | "
+                     + (f"{calls['evaluated']} / {calls['conservative']}" if calls else "–") + " |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    run_cli(main)

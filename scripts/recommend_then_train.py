@@ -95,7 +95,11 @@ def main() -> None:
     p.add_argument("-k", type=int, default=4)
     p.add_argument("-r", "--resolution", default="8")
     p.add_argument("--base_iterations", type=int, default=1000, help="training of the seed-view model")
-    p.add_argument("--iterations", type=int, default=1800, help="training continued on the seed + K views")
+    p.add_argument("--iterations", type=int, default=1200, help="training continued on the seed + K views")
+    p.add_argument("--train_args", default="--num_random_points 3000 --densify_from_iter 100 "
+                                            "--densification_interval 50 --max_gaussians 20000",
+                   help="extra train.py flags of both trainings, one string (--train_args=\"...\"; default: 3,000 "
+                        "initial points, densification from iteration 100 as short runs need, at most 20k Gaussians)")
     p.add_argument("--threads", type=int, default=2)
     args = p.parse_args()
     data, out = Path(args.data), Path(args.output)
@@ -106,7 +110,7 @@ def main() -> None:
     seeds, candidates = make_seed_dataset(data, out, args.num_seed_views)
     print(f"seed views {seeds}; {len(candidates)} candidate poses in {out / 'data' / 'candidates.json'} "
           "(their images are not in that folder)")
-    common = ["-r", args.resolution, "--eval", "-w", "-q"]
+    common = ["-r", args.resolution, "--eval", "-w", "-q", *args.train_args.split()]
     base = out / "base"
     if not is_complete(base):
         secs = run(["train.py", "-s", str(out / "data"), "-m", str(base), "--iterations", str(args.base_iterations),
@@ -151,7 +155,8 @@ def summary_table(results: dict, methods: list[str], seeds: list[int]) -> str:
     s = results["settings"]
     lines = [f"Seed views {s['seed_views']} ({s['base_iterations']} iterations: base test PSNR "
              f"{s['base_test_psnr']:.2f} dB); +{s['k']} views from {s['candidates']} candidate poses, then "
-             f"{s['iterations']} iterations from the base model (`--init_ply`), -r {s['resolution']}.", "",
+             f"{s['iterations']} iterations from the base model (`--init_ply`), -r {s['resolution']}, "
+             f"`{s['train_args']}`.", "",
              "| added views from | " + " | ".join(f"seed {x}" for x in seeds) + " | mean ± std | picks (seed "
              f"{seeds[0]}) | oracles evaluated / conservative |",
              "|---|" + "---|" * len(seeds) + "---|---|---|"]

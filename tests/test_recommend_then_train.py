@@ -37,7 +37,7 @@ def test_end_to_end_on_the_tiny_scene(tiny_scene, tmp_path):
     out = tmp_path / "rtt"
     r = run_cli(str(SCRIPT), "--data", str(tiny_scene), "-o", str(out), "--methods", "coverage", "none", "--seeds", "0",
                 "--num_seed_views", "3", "-k", "2", "-r", "32", "--base_iterations", "30", "--iterations", "40",
-                "--threads", "1", timeout=600)
+                "--train_args=--num_random_points 300 --densify_from_iter 10", "--threads", "1", timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     results = json.loads((out / "results.json").read_text())
     seeds = results["settings"]["seed_views"]

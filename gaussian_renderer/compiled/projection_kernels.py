@@ -119,7 +119,7 @@ def projection_jacobian_kernel(means, quats, log_scales, logit_opacities, sh, de
         cj = np.empty((3, 2))  # cov_cam J^T
         d_cov = np.empty((10, 3))  # per direction: d (a, b, c) of the 2D covariance
         scales = np.empty(3)
-        vals = np.empty(16)
+        vals = np.full(16, np.nan)  # bands above the active degree stay NaN: reading one would show
         grads = np.empty((16, 3))
         unit = np.empty(3)
         live = np.empty(3)

@@ -152,23 +152,25 @@ def gram_root_factors(gram, jac, scale, num_slices):
         R, float64 (columns past the rank are 0). [n, P, A]
     """
     n, a, p = jac.shape
-    out = np.zeros((n, p, a))
+    out = np.empty((n, p, a))  # every entry written below, by the thread that owns the block (first touch)
     per = (n + num_slices - 1) // num_slices
     tol = a * PIVOT_TOLERANCE
     for s in prange(num_slices):
         w = np.empty((a, a))
-        c = np.empty((a, a))
+        c = np.empty((a, a))  # entries (i, k), k <= i, k < rank are written before they are read
+        c_t = np.empty((a, a))
+        jac_t = np.empty((p, a))
         perm = np.empty(a, np.int64)
         root_diag = np.empty(a)
+        inv_root = np.empty(a)
         for b in range(s * per, min(n, (s + 1) * per)):
             for i in range(a):  # equilibrate: S = D^-1/2 G D^-1/2 has a unit diagonal (attributes differ in units)
                 perm[i] = i
                 root_diag[i] = math.sqrt(gram[b, i, i]) if gram[b, i, i] > 0.0 else 0.0
+                inv_root[i] = 1.0 / root_diag[i] if root_diag[i] > 0.0 else 0.0
             for i in range(a):
                 for j in range(a):
-                    c[i, j] = 0.0
-                    den = root_diag[i] * root_diag[j]
-                    w[i, j] = gram[b, i, j] / den if den > 0.0 else 0.0
+                    w[i, j] = gram[b, i, j] * inv_root[i] * inv_root[j]
             rank = 0
             for k in range(a):
                 q, best = k, w[k, k]
@@ -194,13 +196,17 @@ def gram_root_factors(gram, jac, scale, num_slices):
                         w[i, j] -= c[i, k] * c[j, k]
                         w[j, i] = w[i, j]
                 rank = k + 1
-            for i in range(a):  # C_G = D^1/2 Pi C: C's row i belongs to attribute perm[i]
-                for k in range(min(i + 1, rank)):
-                    c[i, k] *= root_diag[perm[i]]
-            for row in range(p):  # R = scale J^T C_G
+            for i in range(a):  # C_G^T = (D^1/2 Pi C)^T (C's row i is attribute perm[i]) and (Pi^T J)^T, transposed so
+                for k in range(a):  # that the product below runs over contiguous rows
+                    c_t[k, i] = c[i, k] * root_diag[perm[i]] if k <= i and k < rank else 0.0
+                for row in range(p):
+                    jac_t[row, i] = jac[b, perm[i], row]
+            for row in range(p):  # R = scale J^T C_G; columns past the rank are 0
                 for k in range(rank):
                     acc = 0.0
-                    for i in range(k, a):
-                        acc += jac[b, perm[i], row] * c[i, k]
+                    for i in range(a):
+                        acc += jac_t[row, i] * c_t[k, i]
                     out[b, row, k] = scale * acc
+                for k in range(rank, a):
+                    out[b, row, k] = 0.0
     return out

@@ -189,9 +189,10 @@ def projection_jacobian_compiled(means: torch.Tensor, quats: torch.Tensor, log_s
     intr = intrinsics.detach().double()
     (neg_x, pos_x), (neg_y, pos_y) = frustum_limits(*intr.unbind(-1), width, height)
     limits = torch.stack([neg_x, pos_x, neg_y, pos_y])
-    out = np.zeros((means.shape[0], 9, total))
+    out = np.empty((means.shape[0], 9, total))  # the kernel zeroes each row in the thread that fills it
+    dtype = torch.float64 if means.dtype == torch.float64 else torch.float32  # the kernel reads either as float64
+    inputs = [_numpy(t.detach().to(dtype)) for t in (means, quats, log_scales, logit_opacities, sh_coeffs)]
     projection_kernels.projection_jacobian_kernel(
-        _float64(means), _float64(quats), _float64(log_scales), _float64(logit_opacities), _float64(sh_coeffs),
-        sh_degree, _numpy(view[:3, :3]), _numpy(view[:3, 3]), _float64(camera_center(view)), _numpy(intr),
+        *inputs, sh_degree, _numpy(view[:3, :3]), _numpy(view[:3, 3]), _float64(camera_center(view)), _numpy(intr),
         _numpy(limits), float(near_plane), float(dilation), cols, out, _use_torch_threads())
     return torch.from_numpy(out)

@@ -93,9 +93,10 @@ def _rotation_and_tangents(q0, q1, q2, q3, rmat, d_rmat):
 @njit(parallel=True, cache=True)
 def projection_jacobian_kernel(means, quats, log_scales, logit_opacities, sh, degree, view_rot, view_trans, center,
                                intrinsics, limits, near_plane, dilation, cols, out, num_slices):
-    """Fills out [N, 9, P] (zeros on entry) with each Gaussian's Jacobian; all arrays float64 except `cols`.
+    """Fills out [N, 9, P] (float64, any content on entry) with each Gaussian's Jacobian, computed in float64.
 
-    means [N, 3], quats [N, 4] raw wxyz, log_scales [N, 3], logit_opacities [N], sh [N, K, 3]; the camera: view_rot
+    means [N, 3], quats [N, 4] raw wxyz, log_scales [N, 3], logit_opacities [N], sh [N, K, 3], all of one float dtype
+    (float32 inputs are read as float64, as the same values converted first); the camera, float64: view_rot
     [3, 3] and view_trans [3] (world-to-camera), center [3] its position, intrinsics (fx, fy, cx, cy), limits
     (neg_x, pos_x, neg_y, pos_y) of the clamped ratios (`projection.frustum_limits`); cols [6] int64 as above.
     """
@@ -124,6 +125,9 @@ def projection_jacobian_kernel(means, quats, log_scales, logit_opacities, sh, de
         unit = np.empty(3)
         live = np.empty(3)
         for i in range(s * step, min(n, (s + 1) * step)):
+            for r in range(9):  # `out` arrives uninitialised: its rows are zeroed by the thread that owns them
+                for col in range(out.shape[2]):
+                    out[i, r, col] = 0.0
             for a in range(3):
                 t[a] = view_trans[a] + view_rot[a, 0] * means[i, 0] + view_rot[a, 1] * means[i, 1] \
                     + view_rot[a, 2] * means[i, 2]
@@ -152,9 +156,10 @@ def projection_jacobian_kernel(means, quats, log_scales, logit_opacities, sh, de
                 d_jac[p, 1, 2] = -fy * (dtc[1, p] / zs2 - 2 * tc[1] * dz[p] / zs3)
 
             # W = view_rot R(q) S, the 2D covariance J W W^T J^T and its tangents
-            _rotation_and_tangents(quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3], rmat, d_rmat)
+            _rotation_and_tangents(np.float64(quats[i, 0]), np.float64(quats[i, 1]), np.float64(quats[i, 2]),
+                                   np.float64(quats[i, 3]), rmat, d_rmat)
             for k in range(3):
-                scales[k] = math.exp(log_scales[i, k])
+                scales[k] = math.exp(np.float64(log_scales[i, k]))
             for a in range(3):
                 for k in range(3):
                     w_mat[a, k] = (view_rot[a, 0] * rmat[0, k] + view_rot[a, 1] * rmat[1, k]
@@ -216,7 +221,7 @@ def projection_jacobian_kernel(means, quats, log_scales, logit_opacities, sh, de
                     out[i, 0, cols[0] + p] = fx * (view_rot[0, p] * zs - t[0] * dz[p]) / zs2
                     out[i, 1, cols[0] + p] = fy * (view_rot[1, p] * zs - t[1] * dz[p]) / zs2
             if cols[3] >= 0:
-                sig = 1.0 / (1.0 + math.exp(-logit_opacities[i]))
+                sig = 1.0 / (1.0 + math.exp(-np.float64(logit_opacities[i])))
                 out[i, 5, cols[3]] = sig * (1.0 - sig)
 
             # colour: max(SH(dir) + 0.5, 0) with dir = mean - centre; rows are 0 where the clamp is active

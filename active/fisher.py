@@ -101,7 +101,7 @@ def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: to
             check_finite(gaussians.params[group], "view", gaussians.num_gaussians)
         gram = _attribute_gram(gaussians, camera, background, settings)  # [N, A, A] float64
         check_finite(gram, "view", gaussians.num_gaussians)
-        indices = torch.nonzero(gram.flatten(1).abs().amax(dim=1) > 0).flatten() if gram.shape[0] else \
+        indices = torch.nonzero((gram != 0).flatten(1).any(dim=1)).flatten() if gram.shape[0] else \
             torch.zeros(0, dtype=torch.long, device=gram.device)  # [n]
         gram = gram[indices]  # [n, A, A]
         jac = _projection_jacobian(gaussians, camera, param_groups, settings.backend, indices)  # [n, A, P]

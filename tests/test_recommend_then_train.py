@@ -1,24 +1,17 @@
 """scripts/recommend_then_train.py: the seed-view dataset holds no candidate image; end to end on the tiny scene
 (recommend from poses alone, continue the seed model with --init_ply)."""
-import importlib.util
 import json
 
 import pytest
 
+from experiments.recommend_then_train import make_seed_dataset
 from tests.conftest import ROOT, run_cli
 
 SCRIPT = ROOT / "scripts" / "recommend_then_train.py"
 
 
-def _module():
-    spec = importlib.util.spec_from_file_location("recommend_then_train", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_seed_dataset_links_seed_and_test_images_only(tiny_scene, tmp_path):
-    seeds, candidates = _module().make_seed_dataset(tiny_scene, tmp_path, 5)
+    seeds, candidates = make_seed_dataset(tiny_scene, tmp_path, 5)
     frames = json.loads((tiny_scene / "transforms_train.json").read_text())["frames"]
     assert len(seeds) == 5 and sorted(seeds + candidates) == list(range(len(frames)))
     folder = tmp_path / "data"

@@ -15,11 +15,11 @@ import torch
 from active.schedule import farthest_point_views
 from experiments.jobs import THREAD_VARS
 from scene.pose_files import read_pose_file
-from utils import model_dir
 from utils.errors import UserError
 from utils.io import write_json
 
 ROOT = Path(__file__).resolve().parents[1]
+IMAGE_EXTENSIONS = (".png", ".jpg", "")  # a Blender frame's file_path names its image without (or with) one
 
 
 def make_seed_dataset(data: Path, out: Path, num_seed: int) -> tuple[list[int], list[int]]:
@@ -35,7 +35,7 @@ def make_seed_dataset(data: Path, out: Path, num_seed: int) -> tuple[list[int], 
     candidates = [v for v in range(len(frames)) if v not in seeds]
     folder = out / "data"
     for frame in [frames[v] for v in seeds] + test["frames"]:
-        for ext in (".png", ".jpg", ""):
+        for ext in IMAGE_EXTENSIONS:
             src = data / (frame["file_path"] + ext)
             if src.is_file():
                 dst = folder / (frame["file_path"] + ext)
@@ -48,7 +48,8 @@ def make_seed_dataset(data: Path, out: Path, num_seed: int) -> tuple[list[int], 
     write_json(folder / "transforms_train.json", {**train, "frames": [frames[v] for v in seeds]})
     write_json(folder / "transforms_test.json", test)
     write_json(folder / "candidates.json", {**train, "frames": [frames[v] for v in candidates]})
-    present = [v for v in candidates if any((folder / (frames[v]["file_path"] + e)).exists() for e in (".png", ""))]
+    present = [v for v in candidates
+               if any((folder / (frames[v]["file_path"] + e)).exists() for e in IMAGE_EXTENSIONS)]
     if present:
         raise UserError(f"{folder}: candidate images are present ({present[:5]}); remove them")
     return seeds, candidates
@@ -64,11 +65,6 @@ def run(cmd: list[str], threads: int, log: Path) -> float:
         tail = "".join(log.read_text().splitlines(keepends=True)[-5:])
         raise UserError(f"{' '.join(cmd[:2])} failed (log {log}):\n{tail}")
     return time.perf_counter() - t0
-
-
-def is_complete(model: Path) -> bool:
-    status = model / model_dir.RUN_STATUS
-    return status.is_file() and json.loads(status.read_text()).get("status") == "complete"
 
 
 def summary_table(results: dict, methods: list[str], seeds: list[int]) -> str:

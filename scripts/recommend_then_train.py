@@ -18,8 +18,9 @@ import argparse
 import json
 from pathlib import Path
 
-from experiments.recommend_then_train import is_complete, make_seed_dataset, run, summary_table
+from experiments.recommend_then_train import make_seed_dataset, run, summary_table
 from utils import model_dir
+from utils.checkpoint import RunDirectory
 from utils.errors import UserError, run_cli
 from utils.io import write_json
 
@@ -52,7 +53,7 @@ def main() -> None:
           "(their images are not in that folder)")
     common = ["-r", args.resolution, "--eval", "-w", "-q", *args.train_args.split()]
     base = out / "base"
-    if not is_complete(base):
+    if not RunDirectory(base).is_complete():
         secs = run(["train.py", "-s", str(out / "data"), "-m", str(base), "--iterations", str(args.base_iterations),
                     "--overwrite", *common], args.threads, out / "logs" / "base.log")
         print(f"base model on {len(seeds)} views: {secs:.0f} s")
@@ -76,7 +77,7 @@ def main() -> None:
                        "oracle_calls": rec["oracle_calls"], "recommend_seconds": secs}
             views = seeds + row.get("picks", [])
             model = out / "continue" / f"{method}_seed{seed}"
-            if "test_psnr" not in row or not is_complete(model):
+            if "test_psnr" not in row or not RunDirectory(model).is_complete():
                 row["train_seconds"] = run(
                     ["train.py", "-s", str(data), "-m", str(model), "--method", "random", "--init_views",
                      *map(str, views), "--max_views", str(len(views)), "--views_per_step", str(args.k),

@@ -162,6 +162,58 @@ def quality_rows(runs: list[Run]) -> list[dict]:
     return rows
 
 
+def seed_rows(runs: list[Run], metric: str = "PSNR") -> list[dict]:
+    """Setup x scene x method setting: `metric` of every complete seed (columns seed_<S>), mean and std over them,
+    and the orderings per seed, not averaged away: `first_in` = seeds in which the setting has the scene's best
+    value (ties count for each), `above_random_in` = seeds in which it beats the scene's `random` run of the same
+    seed ("" for random itself, or when the scene has no random run)."""
+    complete = [r for r in runs if r.results is not None and isinstance(r.results.get(metric), (int, float))]
+    scenes: dict[tuple, dict[str, dict[int, float]]] = defaultdict(lambda: defaultdict(dict))
+    for r in complete:
+        scenes[(r.setup, r.scene)][r.setting][r.seed] = float(r.results[metric])
+    rows = []
+    for (setup, scene), by_setting in sorted(scenes.items()):
+        seeds = sorted({seed for values in by_setting.values() for seed in values})
+        best = {seed: max(v[seed] for v in by_setting.values() if seed in v) for seed in seeds}
+        random_runs = next((v for setting, v in by_setting.items() if setting.split()[0] == "random"), None)
+        for setting, values in sorted(by_setting.items()):
+            row = {"setup": setup, "scene": scene, "method": setting}
+            row.update({f"seed_{seed}": values.get(seed) for seed in seeds})
+            row[f"{metric}_mean"], row[f"{metric}_std"] = mean_std(list(values.values()))
+            row["first_in"] = f"{sum(values[s] == best[s] for s in values)}/{len(values)}"
+            shared = [s for s in values if random_runs is not None and s in random_runs]
+            row["above_random_in"] = ("" if random_runs is None or values is random_runs or not shared
+                                      else f"{sum(values[s] > random_runs[s] for s in shared)}/{len(shared)}")
+            rows.append(row)
+    return rows
+
+
+def seed_tables(rows: list[dict], digits: int = 2) -> str:
+    """`seed_rows` as one markdown table per setup and scene, the best value of each seed in bold."""
+    parts = []
+    for key in dict.fromkeys((r["setup"], r["scene"]) for r in rows):
+        group = [r for r in rows if (r["setup"], r["scene"]) == key]
+        seed_cols = sorted({c for r in group for c in r if c.startswith("seed_")}, key=lambda c: int(c[5:]))
+        best = {c: max(r[c] for r in group if r.get(c) is not None) for c in seed_cols}
+        metric = next(c for c in group[0] if c.endswith("_mean"))
+
+        def seed_cell(row: dict, col: str) -> str:
+            value = row.get(col)
+            if value is None:
+                return "–"
+            return f"**{value:.{digits}f}**" if value == best[col] else f"{value:.{digits}f}"
+        head = ["method"] + [c.replace("_", " ") for c in seed_cols] + [metric[:-5] + " mean ± std", "first in",
+                                                                         "above random in"]
+        lines = [f"### {key[0]}, {key[1]}", "", "| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head)
+                 + "|"]
+        for r in group:
+            cells = [r["method"]] + [seed_cell(r, c) for c in seed_cols] + [_cell(r, metric, digits), r["first_in"],
+                                                                            r["above_random_in"] or "–"]
+            lines.append("| " + " | ".join(cells) + " |")
+        parts.append("\n".join(lines) + "\n")
+    return "\n".join(parts) if parts else "(none)\n"
+
+
 def stage_exhaustive_count(stage: dict) -> int:
     """What exhaustive greedy (every remaining candidate at every pick) evaluates in a step: sum_{j<k} (M - j)."""
     return exhaustive_count(int(stage.get("candidates", 0)), len(stage.get("selected", [])))
@@ -238,12 +290,17 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
 
     out.mkdir(parents=True, exist_ok=True)
     quality, oracles, times = quality_rows(runs), oracle_rows(runs), time_rows(runs)
+    per_seed = seed_rows(runs)
     digits = {"PSNR": 2, "SSIM": 4, "LPIPS": 4, "Spearman": 3, "AUSE": 4, "select": 1, "fisher": 1, "reduction": 2}
     incomplete = [r for r in runs if r.results is None]
     md = ["# Summary", "",
           f"{len(runs)} runs ({len(incomplete)} incomplete) from {len({r.setup for r in runs})} setup(s). "
           "mean ± std: sample standard deviation over seeds and scenes (no ± for a single run).", "",
           "## Quality on the test views", "", markdown_table(quality, digits),
+          "## Per scene and seed", "",
+          "Test PSNR of every seed, the best of each seed in bold; first in: seeds in which the method is best on "
+          "the scene (ties count for each); above random in: seeds in which it beats random's run of the same seed.",
+          "", seed_tables(per_seed),
           "## Oracle evaluations per acquisition step", "",
           "Averaged over steps (and seeds), rounded up, as the paper reports. conservative: every sampled candidate "
           "counts; evaluated: gains actually computed. exhaustive: what exhaustive greedy evaluates on the "
@@ -256,7 +313,7 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
         md += ["## Incomplete runs", ""] + [f"- `{r.path}`: {r.problem}" for r in incomplete] + [""]
     atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text("\n".join(md)))
 
-    tables = [("quality", quality), ("oracles", oracles), ("time", times)]
+    tables = [("quality", quality), ("per_seed", per_seed), ("oracles", oracles), ("time", times)]
     columns = ["table"] + list(dict.fromkeys(c for _, rows in tables for row in rows for c in row))
 
     def write_csv(tmp: str) -> None:

@@ -135,7 +135,7 @@ def test_tables_match_numpy_and_rounded_up_counts(tmp_path):
 
     with open(tmp_path / "summary" / "summary.csv") as fh:
         rows = list(csv.DictReader(fh))
-    assert {r["table"] for r in rows} == {"quality", "oracles", "time"}
+    assert {r["table"] for r in rows} == {"quality", "per_seed", "oracles", "time"}
     q = next(r for r in rows if r["table"] == "quality" and r["method"] == "pop_gs K=3")
     assert abs(float(q["PSNR_mean"]) - expect["quality"][("setup1", "pop_gs K=3")][:, 0].mean()) < 1e-9
 
@@ -145,6 +145,34 @@ def test_tables_match_numpy_and_rounded_up_counts(tmp_path):
         if p.suffix == ".png":
             with Image.open(p) as im:
                 assert im.size[0] > 100 and im.size[1] > 100
+
+
+def test_per_seed_table_keeps_every_seed_and_counts_orderings(tmp_path):
+    """seed_rows per scene: each seed's PSNR, mean/std over seeds, 'first in' (ties count for each) and 'above random
+    in' against random's run of the same seed; a seed missing for one method is left out of its counts."""
+    psnr = {("lego", "random"): [20.0, 22.0, 21.0], ("lego", "pop_gs"): [21.0, 21.5, 23.0],
+            ("lego", "lite_gs"): [21.0, 22.5, None], ("mic", "random"): [30.0, 29.0, 28.0],
+            ("mic", "pop_gs"): [29.0, 29.5, 27.0]}
+    for (scene, method), values in psnr.items():
+        for seed, value in enumerate(values):
+            make_run(tmp_path / "out", "setup1", scene, method, seed, method, 3, 0.1, [(4, 4)],
+                     None if value is None else (value, 0.8, 0.2))
+    runs = summarize.find_runs([str(tmp_path / "out")])
+    rows = {(r["scene"], r["method"].split()[0]): r for r in summarize.seed_rows(runs)}
+    assert len(rows) == 5
+    pop = rows[("lego", "pop_gs")]
+    assert (pop["seed_0"], pop["seed_1"], pop["seed_2"]) == (21.0, 21.5, 23.0)
+    assert abs(pop["PSNR_mean"] - np.mean([21.0, 21.5, 23.0])) < 1e-12
+    assert abs(pop["PSNR_std"] - np.std([21.0, 21.5, 23.0], ddof=1)) < 1e-12
+    assert pop["first_in"] == "2/3" and pop["above_random_in"] == "2/3"  # seed 0 tied with lite_gs: both first
+    lite = rows[("lego", "lite_gs")]
+    assert lite["seed_2"] is None and lite["first_in"] == "2/2" and lite["above_random_in"] == "2/2"
+    assert rows[("lego", "random")]["first_in"] == "0/3" and rows[("lego", "random")]["above_random_in"] == ""
+    assert rows[("mic", "pop_gs")]["above_random_in"] == "1/3" and rows[("mic", "random")]["first_in"] == "2/3"
+    md = summarize.seed_tables(summarize.seed_rows(runs))
+    assert "### setup1, lego" in md and "### setup1, mic" in md
+    assert "| pop_gs K=3 | **21.00** | 21.50 | **23.00** | 21.83 ± 1.04 | 2/3 | 2/3 |" in md
+    assert "| lite_gs K=3 eps=0.1 | **21.00** | **22.50** | – | 21.75 ± 1.06 | 2/2 | 2/2 |" in md
 
 
 def test_cli_writes_outputs_and_rejects_missing_root(tmp_path):

@@ -101,8 +101,7 @@ def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: to
             check_finite(gaussians.params[group], "view", gaussians.num_gaussians)
         gram = _attribute_gram(gaussians, camera, background, settings)  # [N, A, A] float64
         check_finite(gram, "view", gaussians.num_gaussians)
-        indices = torch.nonzero((gram != 0).flatten(1).any(dim=1)).flatten() if gram.shape[0] else \
-            torch.zeros(0, dtype=torch.long, device=gram.device)  # [n]
+        indices = seen_gaussians(gram)  # [n]
         gram = gram[indices]  # [n, A, A]
         jac = _projection_jacobian(gaussians, camera, param_groups, settings.backend, indices)  # [n, A, P]
         check_finite(jac, "view", gaussians.num_gaussians)
@@ -119,8 +118,20 @@ def fisher_view_diagonals(gaussians: GaussianModel, camera: Camera, background: 
     Returns:
         float64 diagonals. [N, P]
     """
-    jac, gram = _jacobian_and_gram(gaussians, camera, background, settings, param_groups)
-    return torch.einsum("nap,nab,nbp->np", jac, gram, jac) / (sigma * sigma)
+    with torch.no_grad():
+        gram = _attribute_gram(gaussians, camera, background, settings)  # [N, A, A] float64
+        indices = seen_gaussians(gram)  # [n]: the other rows of the diagonal are 0
+        jac = _projection_jacobian(gaussians, camera, param_groups, settings.backend, indices)  # [n, A, P]
+        diag = torch.zeros(gram.shape[0], jac.shape[2], dtype=torch.float64, device=gram.device)  # [N, P]
+        diag[indices] = ((gram[indices] @ jac) * jac).sum(1)  # J_p^T G J_p per column p
+    return diag / (sigma * sigma)
+
+
+def seen_gaussians(gram: torch.Tensor) -> torch.Tensor:
+    """Indices [n] of the Gaussians whose attribute Gram [N, A, A] is not all zero (those the view sees)."""
+    if not gram.shape[0]:
+        return torch.zeros(0, dtype=torch.long, device=gram.device)
+    return torch.nonzero((gram != 0).flatten(1).any(dim=1)).flatten()
 
 
 REFERENCE_DIAGONAL_GROUPS = ("means", "log_scales", "logit_opacities", "sh_dc", "sh_rest")  # FisherRF: no rotation

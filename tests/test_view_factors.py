@@ -8,7 +8,8 @@ import torch
 
 from active import build_selector
 from active.base import SelectionContext
-from active.fisher import FisherOracle, fisher_view_blocks, fisher_view_factors
+from active.fisher import FisherOracle, fisher_view_blocks, fisher_view_diagonals, fisher_view_factors
+from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from active.logdet import BlockInformation, DenseBlockInformation
 from gaussian_renderer import RasterSettings
 from scene.cameras import Camera
@@ -55,6 +56,21 @@ def test_factors_equal_dense_blocks_on_the_visible_gaussians():
         torch.testing.assert_close(view.dense(), blocks, rtol=1e-5, atol=1e-6 * scale)
         # ^ J_proj is float32 arithmetic (a float32 model), evaluated on the visible subset: batched float32 ops may
         # round differently for another batch size, ~1e-7 relative (seen 2e-7)
+
+
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_diagonals_on_the_visible_gaussians_equal_the_dense_block_diagonals(backend):
+    """fisher_view_diagonals computes J_proj for the seen Gaussians only; its rows equal the diagonals of the dense
+    blocks of every Gaussian (zero rows for the unseen), for both rasterizer backends."""
+    gaussians, settings = model(), RasterSettings(tile_size=8, chunk_size=8, backend=backend)
+    for cam in cameras()[:3]:
+        blocks = fisher_view_blocks(gaussians, cam, BG, settings, sigma=0.5, param_groups=RAW_PARAMETER_GROUPS)
+        diag = fisher_view_diagonals(gaussians, cam, BG, settings, sigma=0.5)  # [N, 23]
+        dense = torch.diagonal(blocks, dim1=-2, dim2=-1)
+        unseen = blocks.abs().flatten(1).amax(1) == 0
+        assert 0 < int(unseen.sum()) < gaussians.num_gaussians and diag.shape == dense.shape
+        assert torch.equal(diag[unseen], torch.zeros_like(diag[unseen]))
+        torch.testing.assert_close(diag, dense, rtol=1e-5, atol=1e-6 * float(dense.abs().max()))  # float32 J_proj
 
 
 @pytest.mark.parametrize("train_views", [tuple(range(8)), (0, 4)])  # all views (prior covers every candidate block)

@@ -43,7 +43,8 @@ from typing import Callable
 import torch
 
 from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite, gram_root_factors
-from gaussian_renderer import RasterSettings, attribute_gram, project_gaussians, projection_jacobian
+from gaussian_renderer import (RasterSettings, attribute_gram, project_gaussians, projection_jacobian,
+                               seen_attribute_gram)
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from gaussian_renderer.sh import sh_to_colors
 from scene.cameras import Camera
@@ -99,10 +100,8 @@ def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: to
     with torch.no_grad():
         for group in param_groups:  # the dense blocks of every Gaussian would carry a NaN parameter: refuse it too
             check_finite(gaussians.params[group], "view", gaussians.num_gaussians)
-        gram = _attribute_gram(gaussians, camera, background, settings)  # [N, A, A] float64
+        indices, gram = _attribute_gram(gaussians, camera, background, settings, seen_only=True)  # [n], [n, A, A]
         check_finite(gram, "view", gaussians.num_gaussians)
-        indices = seen_gaussians(gram)  # [n]
-        gram = gram[indices]  # [n, A, A]
         jac = _projection_jacobian(gaussians, camera, param_groups, settings.backend, indices)  # [n, A, P]
         check_finite(jac, "view", gaussians.num_gaussians)
         factors = gram_root_factors(gram, jac, sigma, backend)  # R [n, P, A]
@@ -119,19 +118,11 @@ def fisher_view_diagonals(gaussians: GaussianModel, camera: Camera, background: 
         float64 diagonals. [N, P]
     """
     with torch.no_grad():
-        gram = _attribute_gram(gaussians, camera, background, settings)  # [N, A, A] float64
-        indices = seen_gaussians(gram)  # [n]: the other rows of the diagonal are 0
+        indices, gram = _attribute_gram(gaussians, camera, background, settings, seen_only=True)  # [n], [n, A, A]
         jac = _projection_jacobian(gaussians, camera, param_groups, settings.backend, indices)  # [n, A, P]
-        diag = torch.zeros(gram.shape[0], jac.shape[2], dtype=torch.float64, device=gram.device)  # [N, P]
-        diag[indices] = ((gram[indices] @ jac) * jac).sum(1)  # J_p^T G J_p per column p
+        diag = torch.zeros(gaussians.num_gaussians, jac.shape[2], dtype=torch.float64, device=gram.device)  # [N, P]
+        diag[indices] = ((gram @ jac) * jac).sum(1)  # J_p^T G J_p per column p; unseen rows stay 0
     return diag / (sigma * sigma)
-
-
-def seen_gaussians(gram: torch.Tensor) -> torch.Tensor:
-    """Indices [n] of the Gaussians whose attribute Gram [N, A, A] is not all zero (those the view sees)."""
-    if not gram.shape[0]:
-        return torch.zeros(0, dtype=torch.long, device=gram.device)
-    return torch.nonzero((gram != 0).flatten(1).any(dim=1)).flatten()
 
 
 REFERENCE_DIAGONAL_GROUPS = ("means", "log_scales", "logit_opacities", "sh_dc", "sh_rest")  # FisherRF: no rotation
@@ -205,14 +196,16 @@ def _jacobian_and_gram(gaussians: GaussianModel, camera: Camera, background: tor
     return _projection_jacobian(gaussians, camera, param_groups, settings.backend), gram
 
 
-def _attribute_gram(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
-                    settings: RasterSettings) -> torch.Tensor:
-    """G [N, A, A] of one view (render + per-Gaussian Gram), float64."""
+def _attribute_gram(gaussians: GaussianModel, camera: Camera, background: torch.Tensor, settings: RasterSettings,
+                    seen_only: bool = False) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+    """G [N, A, A] of one view (render + per-Gaussian Gram), float64; with `seen_only`, (indices [n], G [n, A, A]) of
+    the Gaussians the view sees (`seen_attribute_gram`)."""
     proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, camera.viewmat,
                              camera.intrinsics, camera.width, camera.height)
     colors = sh_to_colors(gaussians.sh_coeffs, gaussians.means, camera.camera_center, gaussians.active_sh_degree)
-    return attribute_gram(proj.means2d, proj.conics, gaussians.opacities, colors, proj.depths, proj.radii,
-                          camera.width, camera.height, background, settings)
+    gram_of = seen_attribute_gram if seen_only else attribute_gram
+    return gram_of(proj.means2d, proj.conics, gaussians.opacities, colors, proj.depths, proj.radii,
+                   camera.width, camera.height, background, settings)
 
 
 def _projection_jacobian(gaussians: GaussianModel, camera: Camera, param_groups: tuple[str, ...], backend: str,

@@ -80,6 +80,30 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
     return gram
 
 
+@torch.no_grad()
+def seen_attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor, colors: torch.Tensor,
+                        depths: torch.Tensor, radii: torch.Tensor, width: int, height: int, background: torch.Tensor,
+                        settings: RasterSettings | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """`attribute_gram` of the Gaussians the view sees only (those with a non-zero Gram), without forming the others.
+
+    The compiled backend assembles just those rows from its moment sums; the torch backend selects them from the
+    full [N, A, A] result (the obviously correct twin).
+
+    Returns:
+        indices of the seen Gaussians, ascending [n]; their float64 Grams [n, A, A]
+    """
+    settings = settings or RasterSettings()
+    if use_compiled(settings.backend, means2d):
+        check_inputs(means2d, conics, opacities, colors, depths, radii, background)
+        from gaussian_renderer.compiled.ops import attribute_gram_compiled
+        return attribute_gram_compiled(means2d, conics, opacities, colors, depths, radii, width, height, background,
+                                       settings, seen_only=True)
+    gram = attribute_gram(means2d, conics, opacities, colors, depths, radii, width, height, background, settings)
+    indices = torch.nonzero((gram != 0).flatten(1).any(dim=1)).flatten() if gram.shape[0] else \
+        torch.zeros(0, dtype=torch.long, device=gram.device)
+    return indices, gram[indices]
+
+
 @dataclass
 class PairPartials:
     """Packed per-(pixel, Gaussian) Jacobians of the pixel colour w.r.t. the Gaussian's 2D attributes."""

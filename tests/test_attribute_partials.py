@@ -2,7 +2,7 @@
 import pytest
 import torch
 
-from gaussian_renderer import RasterSettings, attribute_gram, pixel_attribute_partials, rasterize
+from gaussian_renderer import RasterSettings, attribute_gram, pixel_attribute_partials, rasterize, seen_attribute_gram
 from gaussian_renderer.reference import rasterize_reference
 from tests.test_rasterize import BG, random_2d_scene
 
@@ -90,6 +90,24 @@ def test_gram_symmetric_psd_and_float32_close(backend):
     # float32 per-tile sums: relative error ~1e-6 of the largest entry per Gaussian.
     scale = gram.abs().amax((1, 2), keepdim=True).clamp_min(1e-30)  # the off-screen Gaussian has G = 0
     assert ((gram32 - gram).abs() / scale).max() < 1e-4
+
+
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_seen_gram_is_the_full_gram_at_its_nonzero_rows(backend):
+    """seen_attribute_gram (compiled: rows assembled from the moment sums; torch: selected from the full Gram) equals
+    attribute_gram's non-zero rows exactly, in order, on a 24x20 scene with culled and off-screen Gaussians."""
+    width, height = 24, 20
+    scene = random_2d_scene(30, width, height, seed=9)
+    settings = RasterSettings(tile_size=8, chunk_size=4, backend=backend)
+    full = attribute_gram(*scene, width, height, BG, settings)  # [N, 9, 9]
+    nonzero = torch.nonzero((full != 0).flatten(1).any(1)).flatten()
+    assert 0 < len(nonzero) < 30  # some Gaussians are not seen
+    indices, gram = seen_attribute_gram(*scene, width, height, BG, settings)
+    assert torch.equal(indices, nonzero) and torch.equal(gram, full[nonzero])
+    none_seen = list(scene)
+    none_seen[0] = scene[0] + 1000.0  # every mean far off-screen
+    indices, gram = seen_attribute_gram(*none_seen, width, height, BG, settings)
+    assert indices.shape == (0,) and gram.shape == (0, 9, 9)
 
 
 @pytest.mark.parametrize("backend", ["torch", "compiled"])

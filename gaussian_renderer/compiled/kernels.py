@@ -407,33 +407,54 @@ MOMENT_INDEX = np.array([[3, 4, 6, 7, 8, 1],
 
 
 @njit(parallel=True, cache=True)
-def assemble_gram(sums, conics, opacities, d):
-    """[N, 6 + D, 6 + D] Gram from the moment sums [N, 15 + 6 D + 1] of `gram` (conics [N, 3], opacities [N]):
-    geometry block L M L^T, cross block L X, colour block (sum w^2) I, with
-    L = blockdiag([[a, b], [b, c]], -1/2, -1, -1/2, 1/o) (so v = alpha L m). Exactly symmetric, float64."""
-    n = sums.shape[0]
+def assemble_gram(sums, conics, opacities, d, rows):
+    """[R, 6 + D, 6 + D] Grams of the Gaussians `rows` [R] from the moment sums [N, 15 + 6 D + 1] of `gram` (conics
+    [N, 3], opacities [N]): geometry block L M L^T, cross block L X, colour block (sum w^2) I, with
+    L = blockdiag([[a, b], [b, c]], -1/2, -1, -1/2, 1/o) (so v = alpha L m). Exactly symmetric, float64; every
+    output element is written (no zero-filled array to page in)."""
     size = GEO + d
-    out = np.zeros((n, size, size))
-    for i in prange(n):
-        lmat = np.zeros((GEO, GEO))
-        lmat[0, 0], lmat[0, 1], lmat[1, 0], lmat[1, 1] = conics[i, 0], conics[i, 1], conics[i, 1], conics[i, 2]
-        lmat[2, 2], lmat[3, 3], lmat[4, 4] = -0.5, -1.0, -0.5
-        lmat[5, 5] = 1.0 / max(opacities[i], 1e-300)
+    out = np.empty((rows.shape[0], size, size))
+    for j in prange(rows.shape[0]):
+        i = rows[j]
+        # L row r has its non-zeros at columns lcol[r, 0 .. lnum[r]) with values lval[r, .]
+        lval = np.empty((GEO, 2))
+        lcol = np.empty((GEO, 2), np.int64)
+        lnum = np.empty(GEO, np.int64)
+        lval[0, 0], lval[0, 1], lcol[0, 0], lcol[0, 1], lnum[0] = conics[i, 0], conics[i, 1], 0, 1, 2
+        lval[1, 0], lval[1, 1], lcol[1, 0], lcol[1, 1], lnum[1] = conics[i, 1], conics[i, 2], 0, 1, 2
+        lval[2, 0], lcol[2, 0], lnum[2] = -0.5, 2, 1
+        lval[3, 0], lcol[3, 0], lnum[3] = -1.0, 3, 1
+        lval[4, 0], lcol[4, 0], lnum[4] = -0.5, 4, 1
+        lval[5, 0], lcol[5, 0], lnum[5] = 1.0 / max(opacities[i], 1e-300), 5, 1
         for r in range(GEO):
             for c in range(r, GEO):
                 acc = 0.0
-                for k in range(GEO):
-                    if lmat[r, k] != 0.0:
-                        for m in range(GEO):
-                            acc += lmat[r, k] * sums[i, MOMENT_INDEX[k, m]] * lmat[c, m]
-                out[i, r, c] = acc
-                out[i, c, r] = acc
+                for a in range(lnum[r]):
+                    for b in range(lnum[c]):
+                        acc += lval[r, a] * sums[i, MOMENT_INDEX[lcol[r, a], lcol[c, b]]] * lval[c, b]
+                out[j, r, c] = acc
+                out[j, c, r] = acc
             for ch in range(d):
                 acc = 0.0
-                for k in range(GEO):
-                    acc += lmat[r, k] * sums[i, NUM_MOMENTS + k * d + ch]
-                out[i, r, GEO + ch] = acc
-                out[i, GEO + ch, r] = acc
+                for a in range(lnum[r]):
+                    acc += lval[r, a] * sums[i, NUM_MOMENTS + lcol[r, a] * d + ch]
+                out[j, r, GEO + ch] = acc
+                out[j, GEO + ch, r] = acc
         for ch in range(d):
-            out[i, GEO + ch, GEO + ch] = sums[i, NUM_MOMENTS + GEO * d]
+            for ch2 in range(d):
+                out[j, GEO + ch, GEO + ch2] = sums[i, NUM_MOMENTS + GEO * d] if ch == ch2 else 0.0
     return out
+
+
+@njit(cache=True)
+def nonzero_rows(sums):
+    """Indices [R] of the rows of `sums` [N, S] with a non-zero entry (the Gaussians a view's Gram sees)."""
+    keep = np.empty(sums.shape[0], np.int64)
+    count = 0
+    for i in range(sums.shape[0]):
+        for a in range(sums.shape[1]):
+            if sums[i, a] != 0.0:
+                keep[count] = i
+                count += 1
+                break
+    return keep[:count].copy()

@@ -152,8 +152,10 @@ def rasterize_compiled(means2d: torch.Tensor, conics: torch.Tensor, opacities: t
 def attribute_gram_compiled(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
                             colors: torch.Tensor, depths: torch.Tensor, radii: torch.Tensor, width: int, height: int,
                             background: torch.Tensor, settings: RasterSettings,
-                            weights: torch.Tensor | None = None) -> torch.Tensor:
-    """`gaussian_renderer.fisher_partials.attribute_gram` by the compiled kernels: float64 [N, A, A]."""
+                            weights: torch.Tensor | None = None,
+                            seen_only: bool = False) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+    """`gaussian_renderer.fisher_partials.attribute_gram` by the compiled kernels: float64 [N, A, A]; with
+    `seen_only`, `seen_attribute_gram`'s (indices [n], Grams [n, A, A]) of the Gaussians with non-zero moment sums."""
     means2d, conics, opacities, colors, background = prepare_inputs(means2d, conics, opacities, colors, background)
     d = colors.shape[1]
     bins = bin_gaussians_compiled(means2d, conics, opacities, radii, depths, width, height, settings)
@@ -161,7 +163,9 @@ def attribute_gram_compiled(means2d: torch.Tensor, conics: torch.Tensor, opaciti
     pixel_weights = np.ones((height, width)) if weights is None else _float64(weights)
     sums = kernels.gram(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height, settings),
                         trans.numpy(), last.numpy(), pixel_weights, _use_torch_threads())  # [N, 15 + 6 D + 1]
-    return torch.from_numpy(kernels.assemble_gram(sums, _float64(conics), _float64(opacities), d))
+    rows = kernels.nonzero_rows(sums) if seen_only else np.arange(sums.shape[0], dtype=np.int64)
+    gram = torch.from_numpy(kernels.assemble_gram(sums, _float64(conics), _float64(opacities), d, rows))
+    return (torch.from_numpy(rows), gram) if seen_only else gram
 
 
 # raw parameter groups and their widths in the Jacobian's columns (sh_rest: 3 (K - 1)), as `projection_kernels`

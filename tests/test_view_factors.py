@@ -9,9 +9,9 @@ import torch
 from active import build_selector
 from active.base import SelectionContext
 from active.fisher import FisherOracle, fisher_view_blocks, fisher_view_diagonals, fisher_view_factors
-from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from active.logdet import BlockInformation, DenseBlockInformation
 from gaussian_renderer import RasterSettings
+from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 from tests.scenes import intrinsics_for, look_at_viewmat, random_gaussians

@@ -416,28 +416,23 @@ def assemble_gram(sums, conics, opacities, d, rows):
     out = np.empty((rows.shape[0], size, size))
     for j in prange(rows.shape[0]):
         i = rows[j]
-        # L row r has its non-zeros at columns lcol[r, 0 .. lnum[r]) with values lval[r, .]
-        lval = np.empty((GEO, 2))
-        lcol = np.empty((GEO, 2), np.int64)
-        lnum = np.empty(GEO, np.int64)
-        lval[0, 0], lval[0, 1], lcol[0, 0], lcol[0, 1], lnum[0] = conics[i, 0], conics[i, 1], 0, 1, 2
-        lval[1, 0], lval[1, 1], lcol[1, 0], lcol[1, 1], lnum[1] = conics[i, 1], conics[i, 2], 0, 1, 2
-        lval[2, 0], lcol[2, 0], lnum[2] = -0.5, 2, 1
-        lval[3, 0], lcol[3, 0], lnum[3] = -1.0, 3, 1
-        lval[4, 0], lcol[4, 0], lnum[4] = -0.5, 4, 1
-        lval[5, 0], lcol[5, 0], lnum[5] = 1.0 / max(opacities[i], 1e-300), 5, 1
+        lmat = np.zeros((GEO, GEO))
+        lmat[0, 0], lmat[0, 1], lmat[1, 0], lmat[1, 1] = conics[i, 0], conics[i, 1], conics[i, 1], conics[i, 2]
+        lmat[2, 2], lmat[3, 3], lmat[4, 4] = -0.5, -1.0, -0.5
+        lmat[5, 5] = 1.0 / max(opacities[i], 1e-300)
         for r in range(GEO):
             for c in range(r, GEO):
                 acc = 0.0
-                for a in range(lnum[r]):
-                    for b in range(lnum[c]):
-                        acc += lval[r, a] * sums[i, MOMENT_INDEX[lcol[r, a], lcol[c, b]]] * lval[c, b]
+                for k in range(GEO):
+                    if lmat[r, k] != 0.0:
+                        for m in range(GEO):
+                            acc += lmat[r, k] * sums[i, MOMENT_INDEX[k, m]] * lmat[c, m]
                 out[j, r, c] = acc
                 out[j, c, r] = acc
             for ch in range(d):
                 acc = 0.0
-                for a in range(lnum[r]):
-                    acc += lval[r, a] * sums[i, NUM_MOMENTS + lcol[r, a] * d + ch]
+                for k in range(GEO):
+                    acc += lmat[r, k] * sums[i, NUM_MOMENTS + k * d + ch]
                 out[j, r, GEO + ch] = acc
                 out[j, GEO + ch, r] = acc
         for ch in range(d):

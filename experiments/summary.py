@@ -44,6 +44,7 @@ class Run:
     results: dict | None = None  # the newest ours_N entry of results.json
     cameras: list[dict] = field(default_factory=list)  # cameras.json (test cameras, then train cameras)
     problem: str = ""  # why the run has no results yet ("" when complete)
+    sessions: list[dict] = field(default_factory=list)  # selection.json "sessions": code, machine, date per start
 
     @property
     def options_label(self) -> str:
@@ -92,6 +93,8 @@ def load_run(model: Path) -> Run:
     if isinstance(sel, dict):
         run.stages = [s for s in sel.get("stages", []) if isinstance(s, dict)]
         run.final = sel.get("final")
+        sessions = sel.get("sessions")
+        run.sessions = [s for s in sessions if isinstance(s, dict)] if isinstance(sessions, list) else []
     cameras = _read_json(model / CAMERAS) if (model / CAMERAS).is_file() else None
     run.cameras = cameras if isinstance(cameras, list) else []
     results = _read_json(model / RESULTS) if (model / RESULTS).is_file() else None
@@ -259,6 +262,30 @@ def time_rows(runs: list[Run]) -> list[dict]:
     return rows
 
 
+def provenance_lines(runs: list[Run]) -> list[str]:
+    """Markdown bullets: the machines, thread counts, dates and code commits the runs were trained with (from the
+    sessions train.py records), each with its number of runs; a run resumed under other code shows 'A then B'."""
+    def count(label: str, values: list[str]) -> str:
+        tally = defaultdict(int)
+        for value in values:
+            tally[value] += 1
+        return f"- {label}: " + "; ".join(f"{value} ({n} run{'s' if n > 1 else ''})" for value, n in tally.items())
+
+    recorded = [r for r in runs if r.sessions]
+    if not recorded:
+        return ["- not recorded (runs trained before train.py wrote sessions into selection.json)"]
+    joined = lambda r, key: " then ".join(dict.fromkeys(str(s.get(key, "?")) for s in r.sessions))  # noqa: E731
+    starts = sorted(str(s.get("started", "?")) for r in recorded for s in r.sessions)
+    lines = [count("machine", [f"{joined(r, 'machine')}, {joined(r, 'cpus')} CPUs, torch {joined(r, 'torch')}, "
+                               f"{joined(r, 'device')}" for r in recorded]),
+             count("threads per process", [joined(r, "threads") for r in recorded]),
+             f"- trained between {starts[0].replace('T', ' ')} and {starts[-1].replace('T', ' ')} (session starts)",
+             count("code", [joined(r, "code") for r in recorded])]
+    if len(recorded) < len(runs):
+        lines.append(f"- {len(runs) - len(recorded)} run(s) without a record (trained before sessions were written)")
+    return lines
+
+
 def _cell(row: dict, col: str, digits: int) -> str:
     """Markdown cell: 'mean ± std' for a *_mean column (std omitted when undefined), plain value otherwise."""
     value = row[col]
@@ -308,7 +335,10 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
           markdown_table(oracles, digits),
           "## Selection wall time (seconds)", "",
           "select_s = selection time per acquisition step including the Fisher blocks; fisher_s = the Fisher part.",
-          "", markdown_table(times, digits)]
+          "", markdown_table(times, digits),
+          "## Provenance", "",
+          "Code commit (+changes: tracked files differed from it), machine and date of every run, as train.py "
+          "recorded them; float sums differ across machines and thread counts.", ""] + provenance_lines(runs) + [""]
     if incomplete:
         md += ["## Incomplete runs", ""] + [f"- `{r.path}`: {r.problem}" for r in incomplete] + [""]
     atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text("\n".join(md)))

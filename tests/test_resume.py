@@ -34,3 +34,7 @@ def test_sigkill_then_resume_matches_uninterrupted(tiny_scene, tmp_path):
     b = json.loads((killed / "selection.json").read_text())
     assert [s["selected"] for s in a["stages"]] == [s["selected"] for s in b["stages"]]
     assert abs(a["final"]["test_psnr"] - b["final"]["test_psnr"]) < 1e-6
+    # provenance: one session per start, the resumed one starting where the checkpoint left off
+    assert len(a["sessions"]) == 1 and a["sessions"][0]["from_iteration"] == 0
+    assert [s["from_iteration"] > 0 for s in b["sessions"]] == [False, True]
+    assert b["sessions"][0]["started"] <= b["sessions"][1]["started"]

@@ -186,3 +186,28 @@ def test_cli_writes_outputs_and_rejects_missing_root(tmp_path):
     (tmp_path / "empty").mkdir()
     r = run_cli("scripts/summarize.py", str(tmp_path / "empty"))
     assert r.returncode == 2 and "no runs" in r.stderr
+
+
+def test_provenance_counts_machines_codes_and_resumes(tmp_path):
+    """The Provenance section: each run's machine and code (a resume under other code as 'A then B'), counted;
+    runs without sessions are said to be unrecorded."""
+    def session(code, started, threads=1):
+        return {"started": started, "from_iteration": 0, "code": code, "machine": "Linux-x", "cpus": 2,
+                "threads": threads, "device": "cpu", "torch": "2.14.1"}
+    sessions = {0: [session("aaaaaaa", "2026-12-03T05:40:00")],
+                1: [session("aaaaaaa", "2026-12-03T05:41:00"), session("bbbbbbb+changes", "2026-12-03T07:02:00")],
+                2: None}
+    for seed, recorded in sessions.items():
+        model = make_run(tmp_path / "out", "setup1", "lego", "pop_gs", seed, "pop_gs", 3, 0.1, [(4, 4)],
+                         (20.0, 0.8, 0.2))
+        if recorded:
+            sel = json.loads((model / "selection.json").read_text())
+            (model / "selection.json").write_text(json.dumps({**sel, "sessions": recorded}))
+    lines = summarize.provenance_lines(summarize.find_runs([str(tmp_path / "out")]))
+    assert "- machine: Linux-x, 2 CPUs, torch 2.14.1, cpu (2 runs)" in lines
+    assert "- threads per process: 1 (2 runs)" in lines
+    assert "- code: aaaaaaa (1 run); aaaaaaa then bbbbbbb+changes (1 run)" in lines
+    assert "- trained between 2026-12-03 05:40:00 and 2026-12-03 07:02:00 (session starts)" in lines
+    assert lines[-1].startswith("- 1 run(s) without a record")
+    summarize.write_outputs(summarize.find_runs([str(tmp_path / "out")]), tmp_path / "summary")
+    assert "## Provenance" in (tmp_path / "summary" / "summary.md").read_text()

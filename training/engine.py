@@ -9,6 +9,7 @@
 """
 from __future__ import annotations
 
+import json
 import random
 import time
 from dataclasses import dataclass, field, replace
@@ -34,6 +35,7 @@ from training.time_estimate import RunTimeEstimator
 from utils.checkpoint import RunDirectory
 from utils.io import write_json
 from utils.model_dir import INPUT_PLY, SELECTION
+from utils.provenance import session_record
 from utils.seeding import seed_everything, set_rng_state
 
 PROGRESS_EVERY_S = 30.0  # run_status.json gets the iteration and Gaussian count this often while training
@@ -71,6 +73,7 @@ class Run:
     lr_schedule: PositionLRSchedule
     eta: RunTimeEstimator | None = None  # the one-line wall-time estimate after the first iterations
     progress_written: float = field(default_factory=time.monotonic)  # when run_status.json last got the progress
+    sessions: list[dict[str, Any]] = field(default_factory=list)  # provenance of each start/resume (selection.json)
 
 
 def open_run(cfg: TrainConfig, model_path: str) -> Run:
@@ -103,9 +106,20 @@ def open_run(cfg: TrainConfig, model_path: str) -> Run:
         if plan.adds and plan.adds[-1] != cfg.active.views_per_step:
             print(f"note: K={cfg.active.views_per_step} does not divide the remaining budget; "
                   f"the last step adds {plan.adds[-1]} view(s)")
+    sessions = previous_sessions(run_dir.path / SELECTION) if checkpoint is not None else []
+    sessions.append(session_record(iteration=state.iteration, device=cfg.model.device))
     return Run(cfg, run_dir, scene, plan, make_selector(cfg) if cfg.active.method else None,
                background_color(cfg.model), raster_settings(cfg.pipeline), state, rng,
-               PositionLRSchedule.from_config(cfg.optim, scene.extent))
+               PositionLRSchedule.from_config(cfg.optim, scene.extent), sessions=sessions)
+
+
+def previous_sessions(selection_path: Path) -> list[dict[str, Any]]:
+    """The sessions an earlier start of this run recorded in selection.json ([] when there is none to read)."""
+    try:
+        sessions = json.loads(selection_path.read_text()).get("sessions", [])
+    except (OSError, ValueError, AttributeError):
+        return []
+    return [s for s in sessions if isinstance(s, dict)] if isinstance(sessions, list) else []
 
 
 def train_stage(run: Run, progress: tqdm) -> None:
@@ -195,7 +209,7 @@ def write_selection(run: Run, final: dict[str, Any] | None = None) -> None:
     data: dict[str, Any] = {"config": {**config_to_dict(cfg.active), "selector_options": run.selector.options(),
                                        "seed": cfg.run.seed, "iterations": cfg.run.iterations,
                                        "source_path": cfg.model.source_path},
-                            "stages": run.state.stages}
+                            "stages": run.state.stages, "sessions": run.sessions}
     if final is not None:
         data["final"] = final
     write_json(run.run_dir.path / SELECTION, data)

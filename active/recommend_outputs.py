@@ -30,6 +30,7 @@ from scene.pose_files import c2w_opengl
 from utils.errors import UserError
 from utils.image import save_image
 from utils.io import write_json
+from utils.provenance import environment_record
 
 MARKER = "recommendations.json"  # an existing output folder holds this; anything else is not overwritten
 
@@ -87,6 +88,7 @@ def recommendation_record(rec: Recommendation, model: LoadedModel, candidates_sp
                                 "delta_abs": model.fisher.delta_abs, "param_groups": model.fisher.param_groups,
                                 "mode": model.fisher.mode, "cache_mb": model.fisher.cache_mb},
                      "raster": {"tile_size": model.settings.tile_size, "backend": model.settings.backend}},
+        "provenance": environment_record(device=device),
         "notes": rec.notes,
     }
 

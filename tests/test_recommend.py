@@ -75,6 +75,7 @@ def test_same_picks_as_train_py_and_no_image_is_read(tiny_scene, tmp_path):
     assert [p["gain"] for p in rec["picks"]] == pytest.approx(stage["gains"], rel=1e-9)
     assert rec["prior"]["view_ids"] == stage["train_views"]
     assert rec["oracle_calls"] == stage["oracle_calls"]
+    assert rec["provenance"]["code"] == json.loads((model / "selection.json").read_text())["sessions"][0]["code"]
     assert len(r.stdout.splitlines()) == 4 and r.stdout.startswith("pick 1: ")
     for p in rec["picks"]:
         assert (out / p["preview"]).is_file() and (out / p["uncertainty_map"]).is_file()

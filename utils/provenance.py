@@ -39,9 +39,13 @@ def code_version(root: str | os.PathLike) -> str:
     return commit + ("+changes" if changed else "")
 
 
-def session_record(*, iteration: int, device: str, root: str | os.PathLike = REPO_ROOT) -> dict[str, Any]:
-    """One training session (a start, or a resume at `iteration`) of the code at `root` on this machine."""
-    return {"started": time.strftime("%Y-%m-%dT%H:%M:%S"), "from_iteration": iteration, "code": code_version(root),
-            "machine": platform.platform(), "cpus": os.cpu_count(), "threads": torch.get_num_threads(),
-            "device": device,
+def environment_record(*, device: str, root: str | os.PathLike = REPO_ROOT) -> dict[str, Any]:
+    """The code at `root` and this machine, now: date, commit, platform, CPUs, torch threads, device, versions."""
+    return {"started": time.strftime("%Y-%m-%dT%H:%M:%S"), "code": code_version(root), "machine": platform.platform(),
+            "cpus": os.cpu_count(), "threads": torch.get_num_threads(), "device": device,
             "python": platform.python_version(), "torch": torch.__version__.split("+")[0]}
+
+
+def session_record(*, iteration: int, device: str, root: str | os.PathLike = REPO_ROOT) -> dict[str, Any]:
+    """One training session (a start, or a resume at `iteration`): `environment_record` with the iteration."""
+    return {"from_iteration": iteration, **environment_record(device=device, root=root)}

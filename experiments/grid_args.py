@@ -37,6 +37,10 @@ def build_parser(description: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--iter_scale", default="0.1", help="multiplies iterations per view, total iterations, the "
                    "densification start (500) and the opacity-reset interval (3000), rounded, at least 1; "
                    "1 = paper (default: 0.1)")
+    p.add_argument("--stage_scale", default=None, help="multiplies the stages before each selection (iterations per "
+                   "view, densification start, opacity-reset interval) instead of --iter_scale, which then scales "
+                   "only the final refinement (the paper's total minus its stages); 1 = the paper's stage lengths "
+                   "(default: --iter_scale for everything)")
     p.add_argument("--num_points", default="3000", help="random initial points for synthetic scenes "
                    "(paper: 100000; default: 3000)")
     p.add_argument("--eps", default=str(DEFAULT_EPS), help="eps of the methods that take one, where the protocol "
@@ -107,7 +111,8 @@ def parse(argv: list[str], description: str | None = None) -> GridConfig:
     seeds = _int("seeds", args.seeds, 1)
     scale = RunScale(resolution=_int("resolution", args.resolution, -1),
                      iter_scale=_float("iter_scale", args.iter_scale, 0.0),
-                     num_points=_int("num_points", args.num_points, 1))
+                     num_points=_int("num_points", args.num_points, 1),
+                     stage_scale=None if args.stage_scale is None else _float("stage_scale", args.stage_scale, 0.0))
     if scale.resolution == 0:
         raise UserError("--resolution must be -1 (as is), 1/2/4/8 (downscale) or a target width, got 0")
     eps = _float("eps", args.eps, 0.0, 1.0)

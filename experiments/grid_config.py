@@ -49,6 +49,7 @@ class GridConfig:
     def record(self) -> dict[str, Any]:
         """The flags that change results (grid.json): runs made with other values are never mixed."""
         return {"resolution": self.scale.resolution, "iter_scale": self.scale.iter_scale,
+                "stage_scale": self.scale.stage_scale,
                 "num_points": self.scale.num_points, "train_args": list(self.extra_args)}
 
 

@@ -1,7 +1,8 @@
 """The paper's experiment protocols as data, and their expansion into one run per (scene, method, K, eps, seed).
 
 Iteration counts are paper scale; `RunScale.iter_scale` shrinks them (and the densification start and the
-opacity-reset interval) for CPU-sized runs. Directory names follow `<method>[_k<K>][_eps<E>]`.
+opacity-reset interval) for CPU-sized runs; `RunScale.stage_scale`, when set, scales the stages before each
+selection on their own (e.g. the paper's stage lengths with a shortened final refinement). Directory names follow `<method>[_k<K>][_eps<E>]`.
 
 `fisherrf20` / `fisherrf20_360` are the protocol of FisherRF (Jiang et al. 2024) that POP-GS reuses, read from
 FisherRF's public code (github.com/JiangWenPL/FisherRF): `scripts/blender_seq1.sh` and `scripts/mip360_seq1.sh`
@@ -65,6 +66,16 @@ PROTOCOLS: dict[str, Protocol] = {
 }
 
 
+def stage_view_sum(protocol: Protocol, k: int) -> int:
+    """Sum of the training-view counts of the stages before each acquisition step (a stage trains
+    iters_per_view x that count): e.g. Setup 1, 2 + 5 + 8 = 15."""
+    views, total = protocol.num_init_views, 0
+    while views < protocol.max_views:
+        total += views
+        views = min(views + k, protocol.max_views)
+    return total
+
+
 @dataclass(frozen=True)
 class RunScale:
     """How far a grid shrinks the paper's runs."""
@@ -72,10 +83,30 @@ class RunScale:
     resolution: int = 8  # train.py -r (8: 100 px for 800 px Blender scenes)
     iter_scale: float = 0.1  # multiplies iterations per view, total, densification start, opacity-reset interval
     num_points: int = 3000  # random initial points for synthetic scenes (paper: 100,000)
+    # None: stages scale with iter_scale. Else it multiplies the stage lengths (iterations per view), the
+    # densification start and the opacity-reset interval, while the refinement after the last step keeps iter_scale.
+    stage_scale: float | None = None
 
     def scaled(self, n: int) -> int:
         """max(1, round(n * iter_scale)), halves rounded up (as the shell scripts did)."""
-        return max(1, int(n * self.iter_scale + 0.5))
+        return _round_scaled(n, self.iter_scale)
+
+    def stage_scaled(self, n: int) -> int:
+        """`n` scaled as the stages are: by stage_scale when it is set, else by iter_scale."""
+        return _round_scaled(n, self.iter_scale if self.stage_scale is None else self.stage_scale)
+
+    def total_iterations(self, protocol: Protocol, k: int) -> int:
+        """Total iterations: the paper's total scaled; with stage_scale, the scaled stages plus the paper's refinement
+        (total minus the stages) scaled by iter_scale."""
+        if self.stage_scale is None:
+            return self.scaled(protocol.iterations)
+        stages = protocol.iters_per_view * stage_view_sum(protocol, k)
+        return (self.stage_scaled(protocol.iters_per_view) * stage_view_sum(protocol, k)
+                + self.scaled(max(protocol.iterations - stages, 0)))
+
+
+def _round_scaled(n: int, scale: float) -> int:
+    return max(1, int(n * scale + 0.5))
 
 
 @dataclass(frozen=True)
@@ -102,10 +133,11 @@ class RunSpec:
             args += ["--eps", f"{self.eps:g}"]
         return args + [
             "--num_init_views", str(protocol.num_init_views), "--views_per_step", str(self.k),
-            "--max_views", str(protocol.max_views), "--iters_per_view", str(scale.scaled(protocol.iters_per_view)),
-            "--iterations", str(scale.scaled(protocol.iterations)), "--num_random_points", str(scale.num_points),
-            "--densify_from_iter", str(scale.scaled(DENSIFY_FROM_ITER)),
-            "--opacity_reset_interval", str(scale.scaled(OPACITY_RESET_INTERVAL))]
+            "--max_views", str(protocol.max_views),
+            "--iters_per_view", str(scale.stage_scaled(protocol.iters_per_view)),
+            "--iterations", str(scale.total_iterations(protocol, self.k)), "--num_random_points", str(scale.num_points),
+            "--densify_from_iter", str(scale.stage_scaled(DENSIFY_FROM_ITER)),
+            "--opacity_reset_interval", str(scale.stage_scaled(OPACITY_RESET_INTERVAL))]
 
 
 def expand(setup: str, scenes: list[str], methods: list[str], seeds: int, eps: float,

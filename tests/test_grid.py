@@ -17,7 +17,7 @@ from active.oracle_counts import mean_rounded_up, schedule_counts
 from active.registry import selector_options
 from active.schedule import farthest_point_views, plan_stages
 from experiments import grid_args
-from experiments.protocols import PROTOCOLS, RunScale, expand
+from experiments.protocols import PROTOCOLS, RunScale, expand, stage_view_sum
 from tests.conftest import ROOT
 from tests.fake_cli import calls, make_fake, option
 from utils.errors import UserError
@@ -377,3 +377,23 @@ def test_tiny_grid_end_to_end_local(tiny_scene, tmp_path):
              "random", "pop_gs", "--seeds", "2", "--out", str(out), "--iter_scale", "0.005", "--num_points", "150",
              "--resolution", "-1", "--device", "cpu", "--", "--sh_degree", "1")
     assert r.returncode == 0 and "4 already finished, 0 to run" in r.stdout, r.stdout + r.stderr
+
+
+def test_stage_scale_keeps_the_stages_and_scales_the_refinement():
+    """--stage_scale 1 --iter_scale 0.1 on Setup 1: the paper's stages (100 v after 2, 5, 8 views = 1,500 iterations,
+    densification from 500, opacity reset every 3,000) and a tenth of its refinement (11,000 - 1,500 = 9,500 -> 950);
+    per K on Setup 4 (stages of 3, 7, 11 views at K = 4; 3, 9 at K = 6). Unset, everything follows --iter_scale."""
+    assert stage_view_sum(PROTOCOLS["setup1"], 3) == 15 and stage_view_sum(PROTOCOLS["fisherrf20"], 1) == 184
+    scale = RunScale(iter_scale=0.1, stage_scale=1.0)
+    run = expand("setup1", ["lego"], ["lite_gs"], 1, 0.1, takes_eps)[0]
+    args = run.schedule_args(PROTOCOLS["setup1"], scale)
+    assert [option(args, f) for f in ("--iters_per_view", "--iterations", "--densify_from_iter",
+                                      "--opacity_reset_interval")] == ["100", "2450", "500", "3000"]
+    totals = {r.k: option(r.schedule_args(PROTOCOLS["setup4"], RunScale(iter_scale=0.01, stage_scale=0.1)),
+                          "--iterations") for r in expand("setup4", ["ship"], ["pop_gs"], 1, 0.1, takes_eps)}
+    # stages of 300 v x 0.1 = 30 v; refinement x 0.01. K = 3: views 3+6+9+12 = 30 -> 900 + 6,000 x 0.01 = 960;
+    # K = 4: 3+7+11 = 21 -> 630 + 87 = 717; K = 6: 3+9 = 12 -> 360 + 114 = 474
+    assert totals == {3: "960", 4: "717", 6: "474"}
+    plain = run.schedule_args(PROTOCOLS["setup1"], RunScale(iter_scale=0.1))
+    assert [option(plain, f) for f in ("--iters_per_view", "--iterations")] == ["10", "1100"]
+    assert plain == run.schedule_args(PROTOCOLS["setup1"], RunScale(iter_scale=0.1, stage_scale=None))

@@ -15,12 +15,15 @@ import csv
 import json
 import logging
 import re
+import shlex
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 from statistics import mean, stdev
 
 from active.oracle_counts import exhaustive_count, mean_rounded_up
+from experiments.flags import RECORD as GRID_RECORD
+from experiments.progress import STATUS as GRID_STATUS
 from utils.errors import UserError
 from utils.io import atomic_write
 from utils.model_dir import CAMERAS, CFG_ARGS, METHOD_PATTERN, RESULTS, RUN_STATUS, SELECTION
@@ -45,6 +48,7 @@ class Run:
     cameras: list[dict] = field(default_factory=list)  # cameras.json (test cameras, then train cameras)
     problem: str = ""  # why the run has no results yet ("" when complete)
     sessions: list[dict] = field(default_factory=list)  # selection.json "sessions": code, machine, date per start
+    job_seconds: float | None = None  # train + render + metrics wall time of its grid job (grid_status.json)
 
     @property
     def options_label(self) -> str:
@@ -124,7 +128,21 @@ def find_runs(roots: list[str]) -> list[Run]:
     if not dirs:
         raise UserError(f"no runs (selection.json / run_status.json) under {', '.join(roots)}; "
                         "run an experiment script first")
-    return [load_run(d) for d in sorted(dirs)]
+    runs = [load_run(d) for d in sorted(dirs)]
+    for grid_dir in {d for r in runs if (d := grid_dir_of(r)) is not None}:
+        status = _read_json(grid_dir / GRID_STATUS) if (grid_dir / GRID_STATUS).is_file() else None
+        jobs = status.get("jobs", []) if isinstance(status, dict) else []
+        seconds = {Path(str(j.get("model_dir"))).resolve(): j.get("seconds") for j in jobs
+                   if isinstance(j, dict) and j.get("state") == "done" and isinstance(j.get("seconds"), (int, float))}
+        for r in runs:
+            r.job_seconds = seconds.get(r.path.resolve(), r.job_seconds)
+    return runs
+
+
+def grid_dir_of(run: Run) -> Path | None:
+    """OUT/<setup> of a run made by scripts/grid.py (the directory holding grid.json), else None."""
+    parents = run.path.resolve().parents
+    return parents[2] if len(parents) > 2 and (parents[2] / GRID_RECORD).is_file() else None
 
 
 def mean_std(values: list[float]) -> tuple[float | None, float | None]:
@@ -258,6 +276,8 @@ def time_rows(runs: list[Run]) -> list[dict]:
         row["fisher_s_per_run_mean"], row["fisher_s_per_run_std"] = mean_std(
             [sum(float(s.get("fisher_seconds", 0.0)) for s in r.stages) for r in group])
         row["select_s_per_step"] = mean(float(s.get("select_seconds", 0.0)) for s in steps)
+        jobs = [r.job_seconds / 60 for r in group if r.job_seconds is not None]
+        row["job_min_mean"], row["job_min_std"] = mean_std(jobs) if jobs else (None, None)
         rows.append(row)
     return rows
 
@@ -274,15 +294,39 @@ def provenance_lines(runs: list[Run]) -> list[str]:
     recorded = [r for r in runs if r.sessions]
     if not recorded:
         return ["- not recorded (runs trained before train.py wrote sessions into selection.json)"]
-    joined = lambda r, key: " then ".join(dict.fromkeys(str(s.get(key, "?")) for s in r.sessions))  # noqa: E731
+    def joined(run: Run, key: str) -> str:  # one value, or 'A then B' when a resume changed it
+        return " then ".join(dict.fromkeys(str(s.get(key, "?")) for s in run.sessions))
+
     starts = sorted(str(s.get("started", "?")) for r in recorded for s in r.sessions)
-    lines = [count("machine", [f"{joined(r, 'machine')}, {joined(r, 'cpus')} CPUs, torch {joined(r, 'torch')}, "
-                               f"{joined(r, 'device')}" for r in recorded]),
+    machines = [f"{joined(r, 'machine')}, {joined(r, 'cpus')} x {joined(r, 'cpu')}, torch {joined(r, 'torch')}, "
+                f"{joined(r, 'device')}" for r in recorded]
+    lines = [count("machine", machines),
              count("threads per process", [joined(r, "threads") for r in recorded]),
              f"- trained between {starts[0].replace('T', ' ')} and {starts[-1].replace('T', ' ')} (session starts)",
              count("code", [joined(r, "code") for r in recorded])]
     if len(recorded) < len(runs):
         lines.append(f"- {len(runs) - len(recorded)} run(s) without a record (trained before sessions were written)")
+    return lines
+
+
+def grid_lines(runs: list[Run]) -> list[str]:
+    """Markdown bullets, one per grid the runs came from: its scale flags (grid.json) and the wall time of its
+    last invocation with the job time spent in it (grid_status.json)."""
+    lines = []
+    for grid_dir in sorted({d for r in runs if (d := grid_dir_of(r)) is not None}):
+        record = _read_json(grid_dir / GRID_RECORD) or {}
+        scale = ", ".join(f"--{k} {record[k]}" for k in ("resolution", "iter_scale", "stage_scale", "num_points")
+                          if record.get(k) is not None)
+        extra = shlex.join(record.get("train_args") or []) or "none"
+        line = f"- grid `{grid_dir.name}`: {scale}; train.py flags after `--`: {extra}"
+        status = _read_json(grid_dir / GRID_STATUS) if (grid_dir / GRID_STATUS).is_file() else None
+        if isinstance(status, dict):
+            done = [j["seconds"] for j in status.get("jobs", []) if isinstance(j, dict) and j.get("state") == "done"
+                    and isinstance(j.get("seconds"), (int, float))]
+            line += (f"; its last invocation (started {status.get('started', '?')}, {status.get('max_parallel', '?')} "
+                     f"job(s) at a time, {status.get('threads_per_job', '?')} thread(s) each) ran {len(done)} job(s) "
+                     f"in {float(status.get('elapsed_s', 0)) / 60:.0f} min wall, {sum(done) / 3600:.2f} h of job time")
+        lines.append(line)
     return lines
 
 
@@ -318,7 +362,7 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     quality, oracles, times = quality_rows(runs), oracle_rows(runs), time_rows(runs)
     per_seed = seed_rows(runs)
-    digits = {"PSNR": 2, "SSIM": 4, "LPIPS": 4, "Spearman": 3, "AUSE": 4, "select": 1, "fisher": 1, "reduction": 2}
+    digits = {"PSNR": 2, "SSIM": 4, "LPIPS": 4, "Spearman": 3, "AUSE": 4, "select": 1, "fisher": 1, "reduction": 2, "job": 1}
     incomplete = [r for r in runs if r.results is None]
     md = ["# Summary", "",
           f"{len(runs)} runs ({len(incomplete)} incomplete) from {len({r.setup for r in runs})} setup(s). "
@@ -334,11 +378,13 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
           "same steps, sum_j (M - j); reduction: conservative count relative to it.", "",
           markdown_table(oracles, digits),
           "## Selection wall time (seconds)", "",
-          "select_s = selection time per acquisition step including the Fisher blocks; fisher_s = the Fisher part.",
+          "select_s = selection time per acquisition step including the Fisher blocks; fisher_s = the Fisher part; "
+          "job_min = wall minutes of the run's grid job (train, render, metrics; its last invocation).",
           "", markdown_table(times, digits),
           "## Provenance", "",
           "Code commit (+changes: tracked files differed from it), machine and date of every run, as train.py "
-          "recorded them; float sums differ across machines and thread counts.", ""] + provenance_lines(runs) + [""]
+          "recorded them; float sums differ across machines and thread counts.", ""]
+    md += provenance_lines(runs) + grid_lines(runs) + [""]
     if incomplete:
         md += ["## Incomplete runs", ""] + [f"- `{r.path}`: {r.problem}" for r in incomplete] + [""]
     atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text("\n".join(md)))

@@ -192,7 +192,7 @@ def test_provenance_counts_machines_codes_and_resumes(tmp_path):
     """The Provenance section: each run's machine and code (a resume under other code as 'A then B'), counted;
     runs without sessions are said to be unrecorded."""
     def session(code, started, threads=1):
-        return {"started": started, "from_iteration": 0, "code": code, "machine": "Linux-x", "cpus": 2,
+        return {"started": started, "from_iteration": 0, "code": code, "machine": "Linux-x", "cpu": "Xeon", "cpus": 2,
                 "threads": threads, "device": "cpu", "torch": "2.14.1"}
     sessions = {0: [session("aaaaaaa", "2026-12-03T05:40:00")],
                 1: [session("aaaaaaa", "2026-12-03T05:41:00"), session("bbbbbbb+changes", "2026-12-03T07:02:00")],
@@ -204,10 +204,30 @@ def test_provenance_counts_machines_codes_and_resumes(tmp_path):
             sel = json.loads((model / "selection.json").read_text())
             (model / "selection.json").write_text(json.dumps({**sel, "sessions": recorded}))
     lines = summarize.provenance_lines(summarize.find_runs([str(tmp_path / "out")]))
-    assert "- machine: Linux-x, 2 CPUs, torch 2.14.1, cpu (2 runs)" in lines
+    assert "- machine: Linux-x, 2 x Xeon, torch 2.14.1, cpu (2 runs)" in lines
     assert "- threads per process: 1 (2 runs)" in lines
     assert "- code: aaaaaaa (1 run); aaaaaaa then bbbbbbb+changes (1 run)" in lines
     assert "- trained between 2026-12-03 05:40:00 and 2026-12-03 07:02:00 (session starts)" in lines
     assert lines[-1].startswith("- 1 run(s) without a record")
-    summarize.write_outputs(summarize.find_runs([str(tmp_path / "out")]), tmp_path / "summary")
-    assert "## Provenance" in (tmp_path / "summary" / "summary.md").read_text()
+    assert summarize.grid_lines(summarize.find_runs([str(tmp_path / "out")])) == []  # no grid.json: not a grid
+
+    # A grid's record and status: its scale line, and each run's job minutes in the time table.
+    grid = tmp_path / "out" / "setup1"
+    (grid / "grid.json").write_text(json.dumps({"resolution": 8, "iter_scale": 0.1, "stage_scale": None,
+                                                "num_points": 3000, "train_args": ["--sh_degree", "1"]}))
+    jobs = [{"model_dir": str(grid / "lego" / "pop_gs" / f"seed{s}"), "state": "done", "seconds": 60.0 * (s + 1)}
+            for s in (0, 1)] + [{"model_dir": str(grid / "lego" / "pop_gs" / "seed2"), "state": "skipped",
+                                 "seconds": None}]
+    (grid / "grid_status.json").write_text(json.dumps({"started": "2026-12-03 05:50:01", "max_parallel": 2,
+                                                       "threads_per_job": 1, "elapsed_s": 150.0, "jobs": jobs}))
+    runs = summarize.find_runs([str(tmp_path / "out")])
+    assert sorted(r.job_seconds for r in runs if r.job_seconds is not None) == [60.0, 120.0]
+    assert summarize.grid_lines(runs) == [
+        "- grid `setup1`: --resolution 8, --iter_scale 0.1, --num_points 3000; train.py flags after `--`: "
+        "--sh_degree 1; its last invocation (started 2026-12-03 05:50:01, 2 job(s) at a time, 1 thread(s) each) "
+        "ran 2 job(s) in 2 min wall, 0.05 h of job time"]
+    (time_row,) = summarize.time_rows(runs)
+    assert time_row["job_min_mean"] == 1.5 and abs(time_row["job_min_std"] - np.std([1.0, 2.0], ddof=1)) < 1e-12
+    summarize.write_outputs(runs, tmp_path / "summary")
+    md = (tmp_path / "summary" / "summary.md").read_text()
+    assert "## Provenance" in md and "- grid `setup1`" in md and "| 1.5 ± 0.7 |" in md

@@ -4,7 +4,8 @@ selection.json; the experiment summary prints them beside its tables.
 
     session_record(iteration=0, device="cpu")
     # {"started": "2026-12-03T05:40:12", "from_iteration": 0, "code": "593579e", "machine": "Linux-6.1-x86_64-...",
-    #  "cpus": 2, "threads": 2, "device": "cpu", "python": "3.12.3", "torch": "2.14.1"}
+    #  "cpu": "Intel(R) Xeon(R) Processor", "cpus": 2, "threads": 2, "device": "cpu", "python": "3.11.9",
+    #  "torch": "2.14.1"}
 """
 from __future__ import annotations
 
@@ -39,10 +40,22 @@ def code_version(root: str | os.PathLike) -> str:
     return commit + ("+changes" if changed else "")
 
 
+def cpu_model() -> str:
+    """The processor's name (/proc/cpuinfo on Linux, else what platform knows; "" when neither says)."""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor()
+
+
 def environment_record(*, device: str, root: str | os.PathLike = REPO_ROOT) -> dict[str, Any]:
     """The code at `root` and this machine, now: date, commit, platform, CPUs, torch threads, device, versions."""
     return {"started": time.strftime("%Y-%m-%dT%H:%M:%S"), "code": code_version(root), "machine": platform.platform(),
-            "cpus": os.cpu_count(), "threads": torch.get_num_threads(), "device": device,
+            "cpu": cpu_model(), "cpus": os.cpu_count(), "threads": torch.get_num_threads(), "device": device,
             "python": platform.python_version(), "torch": torch.__version__.split("+")[0]}
 
 

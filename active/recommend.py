@@ -38,8 +38,6 @@ from utils.errors import UserError
 
 log = logging.getLogger(__name__)
 
-SH_DEGREE_EVERY = 1000  # train.py activates one more SH band every this many iterations
-
 
 @dataclass
 class LoadedModel:
@@ -89,7 +87,8 @@ def _load_model_dir(path: Path, iteration: int, device: str) -> LoadedModel:
     cameras = [c.to(device) for c in read_pose_file(cameras_json)[dataset["num_test"]:]]  # test first, then train
     train_ids = recorded_train_views(path, iteration, len(cameras), active.get("method", ""))
     gaussians = GaussianModel.load_ply(model_dir.point_cloud_ply(path, iteration), device=device)
-    gaussians.active_sh_degree = min(iteration // SH_DEGREE_EVERY, gaussians.max_sh_degree)  # as when trained
+    gaussians.active_sh_degree = GaussianModel.trained_sh_degree(  # as when trained
+        iteration, gaussians.max_sh_degree, bool(saved.get("model", {}).get("init_ply")))
     defaults = FisherSettings()
     fisher = FisherSettings(active.get("sigma", defaults.sigma), active.get("delta_rel", defaults.delta_rel),
                             active.get("delta_abs", defaults.delta_abs),

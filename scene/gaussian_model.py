@@ -15,6 +15,7 @@ STATE_FORMAT_VERSION = 1
 INITIAL_OPACITY = 0.1
 MIN_INIT_SQ_DIST = 1e-7  # 3DGS clamp: coincident points still get a finite log-scale
 MAX_SH_DEGREE = 3  # highest degree the renderer evaluates
+SH_BAND_EVERY = 1000  # training activates one more SH band every this many iterations (3DGS)
 
 
 class GaussianModel:
@@ -66,6 +67,12 @@ class GaussianModel:
     @property
     def device(self) -> torch.device:
         return self.params["means"].device
+
+    @staticmethod
+    def trained_sh_degree(iteration: int, max_degree: int, from_ply: bool) -> int:
+        """The active SH degree of train.py's model after `iteration` iterations: one more band every
+        `SH_BAND_EVERY`, or every band from the start for a run continued from a PLY (--init_ply, as 3DGS loads one)."""
+        return max_degree if from_ply else min(iteration // SH_BAND_EVERY, max_degree)
 
     def increase_sh_degree(self) -> None:
         """Activate one more SH band, up to `max_sh_degree`."""

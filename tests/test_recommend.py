@@ -202,3 +202,24 @@ def test_bad_input_is_one_error_line(tmp_path):
                                       str(cand))
     assert "N must be positive" in _cli_error(tmp_path, "-m", str(ply), "--captured", str(captured),
                                               "--candidates", "orbit:0")
+
+
+def test_same_picks_as_train_py_on_a_model_continued_from_a_ply(tiny_scene, tmp_path):
+    """A run continued with --init_ply trains with every SH band from its first iteration; recommend.py must
+    rebuild that degree (not one band per 1,000 iterations) to give the run's own gains."""
+    base = tmp_path / "base"
+    r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(base), "--iterations", "30", "--seed", "1", "--quiet")
+    assert r.returncode == 0, r.stderr
+    model = tmp_path / "continued"
+    r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(model), "--init_ply",
+                str(base / "point_cloud" / "iteration_30" / "point_cloud.ply"), "--method", "pop_gs",
+                "--num_init_views", "2", "--views_per_step", "3", "--max_views", "5", "--iters_per_view", "10",
+                "--iterations", "40", "--save_iterations", "20", "--seed", "3", "--quiet")
+    assert r.returncode == 0, r.stderr
+    stage = json.loads((model / "selection.json").read_text())["stages"][0]
+    out = tmp_path / "rec"
+    r = run_cli("recommend.py", "-m", str(model), "--iteration", "20", "--candidates", "unused", "-k", "3",
+                "--method", "pop_gs", "-o", str(out), "--no_previews", "--quiet")
+    assert r.returncode == 0, r.stderr
+    rec = json.loads((out / "recommendations.json").read_text())
+    assert [p["gain"] for p in rec["picks"]] == pytest.approx(stage["gains"], rel=1e-9)

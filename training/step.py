@@ -7,7 +7,7 @@ import torch
 
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
-from scene.gaussian_model import GaussianModel
+from scene.gaussian_model import SH_BAND_EVERY, GaussianModel
 from training.config import TrainConfig
 from training.optim import PositionLRSchedule
 from training.state import TrainState
@@ -22,7 +22,7 @@ def training_step(state: TrainState, camera: Camera, cfg: TrainConfig, backgroun
     sync on a GPU, so the caller does it only when it logs. The finiteness guard is the step's one sync."""
     it = state.iteration + 1
     lr_schedule.apply(state.optimizer, it)
-    if it % 1000 == 0:
+    if it % SH_BAND_EVERY == 0:
         state.gaussians.increase_sh_degree()
     out = render(camera, state.gaussians, background, settings)
     gt = camera.image

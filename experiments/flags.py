@@ -15,9 +15,9 @@ RECORD = "grid.json"
 # cfg_args entries that may differ between runs of one grid (paths, device, logging, restart flags)
 NOT_COMPARED = {"source_path", "model_path", "device", "quiet", "resume", "overwrite"}
 # train.py config field -> the grid flag that sets it
-GRID_FLAG = {"resolution": "--resolution", "num_random_points": "--num_points",
-             "iterations": "--iter_scale / --stage_scale", "iters_per_view": "--iter_scale / --stage_scale",
-             "densify_from_iter": "--iter_scale / --stage_scale", "opacity_reset_interval": "--iter_scale / --stage_scale"}
+SCALE_FLAGS = "--iter_scale / --stage_scale"
+GRID_FLAG = {"resolution": "--resolution", "num_random_points": "--num_points", "iterations": SCALE_FLAGS,
+             "iters_per_view": SCALE_FLAGS, "densify_from_iter": SCALE_FLAGS, "opacity_reset_interval": SCALE_FLAGS}
 
 
 def check_flags(cfg: GridConfig, specs: list[JobSpec]) -> None:

@@ -2,7 +2,8 @@
 
 Iteration counts are paper scale; `RunScale.iter_scale` shrinks them (and the densification start and the
 opacity-reset interval) for CPU-sized runs; `RunScale.stage_scale`, when set, scales the stages before each
-selection on their own (e.g. the paper's stage lengths with a shortened final refinement). Directory names follow `<method>[_k<K>][_eps<E>]`.
+selection on their own (e.g. the paper's stage lengths with a shortened final refinement). Directory names follow
+`<method>[_k<K>][_eps<E>]`.
 
 `fisherrf20` / `fisherrf20_360` are the protocol of FisherRF (Jiang et al. 2024) that POP-GS reuses, read from
 FisherRF's public code (github.com/JiangWenPL/FisherRF): `scripts/blender_seq1.sh` and `scripts/mip360_seq1.sh`

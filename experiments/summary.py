@@ -294,6 +294,7 @@ def provenance_lines(runs: list[Run]) -> list[str]:
     recorded = [r for r in runs if r.sessions]
     if not recorded:
         return ["- not recorded (runs trained before train.py wrote sessions into selection.json)"]
+
     def joined(run: Run, key: str) -> str:  # one value, or 'A then B' when a resume changed it
         return " then ".join(dict.fromkeys(str(s.get(key, "?")) for s in run.sessions))
 
@@ -362,7 +363,8 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     quality, oracles, times = quality_rows(runs), oracle_rows(runs), time_rows(runs)
     per_seed = seed_rows(runs)
-    digits = {"PSNR": 2, "SSIM": 4, "LPIPS": 4, "Spearman": 3, "AUSE": 4, "select": 1, "fisher": 1, "reduction": 2, "job": 1}
+    digits = {"PSNR": 2, "SSIM": 4, "LPIPS": 4, "Spearman": 3, "AUSE": 4, "select": 1, "fisher": 1, "reduction": 2,
+              "job": 1}
     incomplete = [r for r in runs if r.results is None]
     md = ["# Summary", "",
           f"{len(runs)} runs ({len(incomplete)} incomplete) from {len({r.setup for r in runs})} setup(s). "

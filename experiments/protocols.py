@@ -101,9 +101,9 @@ class RunScale:
         (total minus the stages) scaled by iter_scale."""
         if self.stage_scale is None:
             return self.scaled(protocol.iterations)
-        stages = protocol.iters_per_view * stage_view_sum(protocol, k)
-        return (self.stage_scaled(protocol.iters_per_view) * stage_view_sum(protocol, k)
-                + self.scaled(max(protocol.iterations - stages, 0)))
+        views = stage_view_sum(protocol, k)
+        refinement = max(protocol.iterations - protocol.iters_per_view * views, 0)  # paper scale
+        return self.stage_scaled(protocol.iters_per_view) * views + self.scaled(refinement)
 
 
 def _round_scaled(n: int, scale: float) -> int:

@@ -129,13 +129,11 @@ def find_runs(roots: list[str]) -> list[Run]:
         raise UserError(f"no runs (selection.json / run_status.json) under {', '.join(roots)}; "
                         "run an experiment script first")
     runs = [load_run(d) for d in sorted(dirs)]
+    seconds: dict[Path, float] = {}  # every grid's finished jobs, read once per grid
     for grid_dir in {d for r in runs if (d := grid_dir_of(r)) is not None}:
-        status = _read_json(grid_dir / GRID_STATUS) if (grid_dir / GRID_STATUS).is_file() else None
-        jobs = status.get("jobs", []) if isinstance(status, dict) else []
-        seconds = {Path(str(j.get("model_dir"))).resolve(): j.get("seconds") for j in jobs
-                   if isinstance(j, dict) and j.get("state") == "done" and isinstance(j.get("seconds"), (int, float))}
-        for r in runs:
-            r.job_seconds = seconds.get(r.path.resolve(), r.job_seconds)
+        seconds.update(done_job_seconds(_grid_status(grid_dir)))
+    for run in runs:
+        run.job_seconds = seconds.get(run.path.resolve())
     return runs
 
 
@@ -143,6 +141,18 @@ def grid_dir_of(run: Run) -> Path | None:
     """OUT/<setup> of a run made by scripts/grid.py (the directory holding grid.json), else None."""
     parents = run.path.resolve().parents
     return parents[2] if len(parents) > 2 and (parents[2] / GRID_RECORD).is_file() else None
+
+
+def _grid_status(grid_dir: Path) -> dict:
+    """grid_status.json of a grid ({} when it is missing or unreadable)."""
+    status = _read_json(grid_dir / GRID_STATUS) if (grid_dir / GRID_STATUS).is_file() else None
+    return status if isinstance(status, dict) else {}
+
+
+def done_job_seconds(status: dict) -> dict[Path, float]:
+    """Model directory -> wall seconds of each job a grid's last invocation ran to the end (`_grid_status`)."""
+    return {Path(str(j.get("model_dir"))).resolve(): float(j["seconds"]) for j in status.get("jobs", [])
+            if isinstance(j, dict) and j.get("state") == "done" and isinstance(j.get("seconds"), (int, float))}
 
 
 def mean_std(values: list[float]) -> tuple[float | None, float | None]:
@@ -320,10 +330,9 @@ def grid_lines(runs: list[Run]) -> list[str]:
                           if record.get(k) is not None)
         extra = shlex.join(record.get("train_args") or []) or "none"
         line = f"- grid `{grid_dir.name}`: {scale}; train.py flags after `--`: {extra}"
-        status = _read_json(grid_dir / GRID_STATUS) if (grid_dir / GRID_STATUS).is_file() else None
-        if isinstance(status, dict):
-            done = [j["seconds"] for j in status.get("jobs", []) if isinstance(j, dict) and j.get("state") == "done"
-                    and isinstance(j.get("seconds"), (int, float))]
+        status = _grid_status(grid_dir)
+        if status:
+            done = list(done_job_seconds(status).values())
             line += (f"; its last invocation (started {status.get('started', '?')}, {status.get('max_parallel', '?')} "
                      f"job(s) at a time, {status.get('threads_per_job', '?')} thread(s) each) ran {len(done)} job(s) "
                      f"in {float(status.get('elapsed_s', 0)) / 60:.0f} min wall, {sum(done) / 3600:.2f} h of job time")

@@ -5,6 +5,8 @@ from dataclasses import dataclass
 
 from utils.errors import UserError
 
+ALPHA_MIN_FLOOR = 1e-9  # smallest alpha_min: `compiled.row_kernels.exp_neg` is exact down to exp(-22)
+
 
 @dataclass(frozen=True)
 class RasterSettings:
@@ -25,6 +27,9 @@ class RasterSettings:
         if not 0 < self.alpha_min < self.alpha_max < 1:
             raise UserError(f"need 0 < alpha_min < alpha_max < 1, got {self.alpha_min} and {self.alpha_max}; "
                             "use the defaults 1/255 and 0.99")
+        if self.alpha_min < ALPHA_MIN_FLOOR:
+            raise UserError(f"alpha_min must be at least {ALPHA_MIN_FLOOR:g} (the compiled kernels' exp covers "
+                            f"exp(-22) and up), got {self.alpha_min}; use the default 1/255")
         if not 0 <= self.transmittance_min < 1:
             raise UserError(f"transmittance_min must be in [0, 1), got {self.transmittance_min}; use 1e-4")
         from gaussian_renderer.compiled import BACKENDS, NUMBA_HINT, numba_import_error

@@ -217,3 +217,19 @@ def test_cli_compiled_without_numba_is_one_error_line(tiny_scene, tmp_path):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and "numba" in lines[0] and "torch" in lines[0]
     assert not (tmp_path / "model").exists()  # refused while parsing the flags: nothing written
+
+
+def test_exp_neg_matches_exp_where_the_kernels_use_it():
+    """The vectorisable exp of `row_kernels` against math.exp over [EXP_MIN, 0] (relative 1e-13), NaN kept."""
+    from gaussian_renderer.compiled.row_kernels import EXP_MIN, exp_neg
+    xs = torch.linspace(EXP_MIN, 0.0, 20_001, dtype=torch.float64).tolist() + [-1e-300, math.log(1 / 255)]
+    worst = max(abs(exp_neg(x) - math.exp(x)) / math.exp(x) for x in xs)
+    assert worst < 1e-13, worst
+    assert math.isnan(exp_neg(float("nan")))
+
+
+def test_alpha_min_below_the_kernels_exp_range_is_refused():
+    from gaussian_renderer.settings import ALPHA_MIN_FLOOR
+    with pytest.raises(UserError, match="alpha_min must be at least"):
+        RasterSettings(alpha_min=ALPHA_MIN_FLOOR / 2)
+    assert math.log(ALPHA_MIN_FLOOR) > -22.0  # cut = ln(alpha_min / o) stays inside exp_neg's exact range

@@ -2,7 +2,8 @@
 
 `RasterSettings.backend`: "torch" = the pure-torch path; "compiled" = these kernels (a `UserError` when numba
 cannot be imported); "auto" = compiled when numba imports, else torch with one log line. CUDA tensors always take
-the torch path. Kernels live in `kernels.py` (numba) and `ops.py` (torch wrappers, autograd).
+the torch path. Kernels live in `kernels.py` and `row_kernels.py` (numba; the latter row-vectorised) and
+`ops.py` (torch wrappers, autograd).
 
 numba caches compiled kernels on disk (`cache=True`), keyed by the kernel source file's path and modification
 time, so an edited kernel recompiles. The cache goes next to the source when that folder is writable, else to

@@ -1,4 +1,5 @@
-"""numba kernels of the compiled CPU rasterizer: tile binning, forward, backward and the Fisher Gram.
+"""numba kernels of the compiled CPU rasterizer: tile binning, backward, Gram assembly; the forward and the Gram's
+moment sums, which follow the same rules row-vectorised, are in `row_kernels`.
 
 Each kernel runs in parallel over `num_slices` slices, one per thread (interleaved tiles; for binning, contiguous
 runs of the depth-sorted Gaussians), and works one pixel at a time, as the CUDA 3DGS kernel does: per tile it walks
@@ -128,61 +129,6 @@ def _pair_alpha(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max):
     return gauss, raw, alpha
 
 
-@njit(parallel=True, cache=True)
-def forward(offsets, ids, rects, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
-            trans_min, image, trans_out, last_out):
-    """Front-to-back compositing. Writes image [D, H, W] (background included), trans_out [H, W] (final
-    transmittance) and last_out [H, W] (int32, see the module docstring)."""
-    num_tiles = offsets.shape[0] - 1
-    d = colors.shape[1]
-    fx, fy, ix, iy = _pixel_offsets(tile_size)
-    num_px = fx.shape[0]
-    for t in prange(num_tiles):
-        px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
-        trans = np.ones(num_px)
-        color = np.zeros((num_px, d))
-        last = np.zeros(num_px, np.int32)
-        done = np.zeros(num_px, np.bool_)
-        remaining = 0
-        for p in range(num_px):
-            if px0 + ix[p] >= width or py0 + iy[p] >= height:
-                done[p] = True
-            else:
-                remaining += 1
-        start, end = offsets[t], offsets[t + 1]
-        for k in range(start, end):
-            if remaining == 0:
-                break
-            g = ids[k]
-            mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-            ca, cb, cc, o, cut = geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6]
-            x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
-            for base in range(y_lo * tile_size, y_hi * tile_size + 1, tile_size):
-                for p in range(base + x_lo, base + x_hi + 1):
-                    if done[p]:
-                        continue
-                    _, _, alpha = _pair_alpha(fx[p] - mx, fy[p] - my, ca, cb, cc, o, cut, alpha_min, alpha_max)
-                    if alpha == 0.0:
-                        continue
-                    test = trans[p] * (1.0 - alpha)
-                    if test < trans_min:
-                        done[p] = True
-                        remaining -= 1
-                        continue
-                    w = alpha * trans[p]
-                    for ch in range(d):
-                        color[p, ch] += w * colors[g, ch]
-                    trans[p] = test
-                    last[p] = k - start + 1
-        for p in range(num_px):
-            x, y = px0 + ix[p], py0 + iy[p]
-            if x < width and y < height:
-                for ch in range(d):
-                    image[ch, y, x] = color[p, ch] + trans[p] * background[ch]
-                trans_out[y, x] = trans[p]
-                last_out[y, x] = last[p]
-
-
 @njit(inline="always", cache=True)
 def _load_tile(px0, py0, ix, iy, width, height, trans_final, last_in, trans, last):
     """Fill trans / last [P] of the tile at (px0, py0) from the forward pass (last = 0 for pixels outside the
@@ -282,118 +228,7 @@ def _sum_slices(buf):
     return out
 
 
-NUM_MOMENTS = 15  # sum s dx^i dy^j for i + j <= 4, in the order of `gram`'s accumulators
-
-
-@njit(parallel=True, cache=True)
-def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
-         trans_final, last_in, pixel_weights, num_slices):
-    """Per-Gaussian moment sums for the attribute Gram, [N, 15 + 6 D + 1] (pixels p weighted by pixel_weights).
-
-    Per pair: u = dC/dalpha [D] = c T - B / (1 - alpha) (B = colour behind, background included), w = alpha T,
-    and where alpha is not clamped v = dalpha / d(geometry) = alpha L m with m = (dx, dy, dx^2, dx dy, dy^2, 1)
-    and L a per-Gaussian constant (conic, 1 / opacity). So sum_p |u|^2 v v^T = L M L^T needs only the 15 moments
-    of s = |u|^2 alpha^2 over dx, dy (1, dx, dy, dx^2, dx dy, dy^2, dx^3, dx^2 dy, dx dy^2, dy^3, dx^4, dx^3 dy,
-    dx^2 dy^2, dx dy^3, dy^4), and sum_p w v u^T = L X with X [6, D] = sum_p w alpha m u^T (row-major); last,
-    sum_p w^2. `assemble_gram` applies L once per Gaussian.
-    """
-    n, d = colors.shape
-    row_len = NUM_MOMENTS + GEO * d + 1
-    num_tiles = offsets.shape[0] - 1
-    fx, fy, ix, iy = _pixel_offsets(tile_size)
-    num_px = fx.shape[0]
-    buf = np.zeros((num_slices, n, row_len))
-    for sl in prange(num_slices):  # interleaved tiles, one buffer per slice
-        trans = np.empty(num_px)
-        behind = np.empty((num_px, d))
-        wpix = np.empty(num_px)
-        last = np.empty(num_px, np.int32)
-        cross = np.empty(GEO * d)
-        u = np.empty(d)
-        for t in range(sl, num_tiles, num_slices):
-            px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
-            longest = _load_tile(px0, py0, ix, iy, width, height, trans_final, last_in, trans, last)
-            for p in range(num_px):
-                x, y = px0 + ix[p], py0 + iy[p]
-                if x < width and y < height:
-                    wpix[p] = pixel_weights[y, x]
-                    for ch in range(d):
-                        behind[p, ch] = trans[p] * background[ch]
-            start = offsets[t]
-            for j in range(longest - 1, -1, -1):
-                g = ids[start + j]
-                mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-                ca, cb, cc, o, cut = geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6]
-                m0 = m1 = m2 = m3 = m4 = m5 = m6 = m7 = m8 = m9 = m10 = m11 = m12 = m13 = m14 = 0.0
-                ww = 0.0
-                cross[:] = 0.0
-                x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
-                for base in range(y_lo * tile_size, y_hi * tile_size + 1, tile_size):
-                    for p in range(base + x_lo, base + x_hi + 1):
-                        if j >= last[p]:
-                            continue
-                        dx, dy = fx[p] - mx, fy[p] - my
-                        _, raw, alpha = _pair_alpha(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
-                        if alpha == 0.0:
-                            continue
-                        inv = 1.0 / (1.0 - alpha)
-                        t_front = trans[p] * inv
-                        w = alpha * t_front
-                        wp = wpix[p]
-                        uu = 0.0
-                        for ch in range(d):
-                            u[ch] = colors[g, ch] * t_front - behind[p, ch] * inv
-                            uu += u[ch] * u[ch]
-                            behind[p, ch] += w * colors[g, ch]
-                        trans[p] = t_front
-                        ww += wp * w * w
-                        if raw < alpha_max:
-                            xx, xy, yy = dx * dx, dx * dy, dy * dy
-                            s = wp * uu * alpha * alpha
-                            m0 += s
-                            m1 += s * dx
-                            m2 += s * dy
-                            m3 += s * xx
-                            m4 += s * xy
-                            m5 += s * yy
-                            m6 += s * xx * dx
-                            m7 += s * xx * dy
-                            m8 += s * dx * yy
-                            m9 += s * yy * dy
-                            m10 += s * xx * xx
-                            m11 += s * xx * xy
-                            m12 += s * xx * yy
-                            m13 += s * xy * yy
-                            m14 += s * yy * yy
-                            q = wp * w * alpha
-                            for ch in range(d):
-                                qu = q * u[ch]
-                                cross[ch] += qu * dx
-                                cross[d + ch] += qu * dy
-                                cross[2 * d + ch] += qu * xx
-                                cross[3 * d + ch] += qu * xy
-                                cross[4 * d + ch] += qu * yy
-                                cross[5 * d + ch] += qu
-                row = buf[sl, g]
-                row[0] += m0
-                row[1] += m1
-                row[2] += m2
-                row[3] += m3
-                row[4] += m4
-                row[5] += m5
-                row[6] += m6
-                row[7] += m7
-                row[8] += m8
-                row[9] += m9
-                row[10] += m10
-                row[11] += m11
-                row[12] += m12
-                row[13] += m13
-                row[14] += m14
-                for a in range(GEO * d):
-                    row[NUM_MOMENTS + a] += cross[a]
-                row[row_len - 1] += ww
-    return _sum_slices(buf)
+NUM_MOMENTS = 15  # sum s dx^i dy^j for i + j <= 4, in the order of `row_kernels.gram`'s accumulators
 
 
 # Where each entry of the monomial Gram M = sum s m m^T (m = dx, dy, dx^2, dx dy, dy^2, 1) sits among the 15 moments

@@ -12,7 +12,7 @@ import numba
 import numpy as np
 import torch
 
-from gaussian_renderer.compiled import kernels
+from gaussian_renderer.compiled import kernels, row_kernels
 from gaussian_renderer.settings import RasterSettings
 from gaussian_renderer.tiles import BLOCK_PIXELS, NUM_GEOMETRY_ATTRIBUTES, grid_size, tile_ranges
 from utils.errors import UserError
@@ -109,8 +109,8 @@ def composite_compiled(bins: CompiledBins, means2d, conics, opacities, colors, b
     trans = np.ones((height, width))
     last = np.zeros((height, width), np.int32)
     _use_torch_threads()
-    kernels.forward(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height, settings),
-                    float(settings.transmittance_min), image, trans, last)
+    row_kernels.forward(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height,
+                                      settings), float(settings.transmittance_min), image, trans, last)
     return torch.from_numpy(image).to(colors.dtype), torch.from_numpy(trans), torch.from_numpy(last)
 
 
@@ -161,8 +161,9 @@ def attribute_gram_compiled(means2d: torch.Tensor, conics: torch.Tensor, opaciti
     bins = bin_gaussians_compiled(means2d, conics, opacities, radii, depths, width, height, settings)
     _, trans, last = composite_compiled(bins, means2d, conics, opacities, colors, background, width, height, settings)
     pixel_weights = np.ones((height, width)) if weights is None else _float64(weights)
-    sums = kernels.gram(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height, settings),
-                        trans.numpy(), last.numpy(), pixel_weights, _use_torch_threads())  # [N, 15 + 6 D + 1]
+    sums = row_kernels.gram(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height,
+                                          settings), trans.numpy(), last.numpy(), pixel_weights,
+                            _use_torch_threads())  # [N, 15 + 6 D + 1]
     rows = kernels.nonzero_rows(sums) if seen_only else np.arange(sums.shape[0], dtype=np.int64)
     gram = torch.from_numpy(kernels.assemble_gram(sums, _float64(conics), _float64(opacities), d, rows))
     return (torch.from_numpy(rows), gram) if seen_only else gram

@@ -1,14 +1,14 @@
-"""numba kernels of the compiled CPU rasterizer: tile binning, backward, Gram assembly; the forward and the Gram's
-moment sums, which follow the same rules row-vectorised, are in `row_kernels`.
+"""numba kernels of the compiled CPU rasterizer: tile binning, the pixel reach box of a pair and the Gram assembly;
+the forward, backward and Gram moment-sum kernels that follow these rules are in `row_kernels`.
 
-Each kernel runs in parallel over `num_slices` slices, one per thread (interleaved tiles; for binning, contiguous
-runs of the depth-sorted Gaussians), and works one pixel at a time, as the CUDA 3DGS kernel does: per tile it walks
-the tile's depth-sorted list and updates the tile's pixels, so nothing is padded and a tile stops as soon as all
-its pixels are finished. A kernel "tile" is a block of whole binning tiles (`tiles.BLOCK_PIXELS`); a pair visits
-only the pixels of its reach box (`_pixel_box`: the ellipse where alpha >= alpha_min can hold) clipped to its
-tile rectangle (`rects`, pixels), so the block size changes the work, never the pixels a Gaussian touches. All
-arrays are float64 (one compiled specialisation; the wrappers in `gaussian_renderer.compiled.ops` convert),
-per-Gaussian sums go to one buffer per slice, added up at the end.
+The walking kernels run in parallel over `num_slices` slices, one per thread (interleaved tiles; for binning,
+contiguous runs of the depth-sorted Gaussians): per tile they walk the tile's depth-sorted list and update the
+tile's pixels, as the CUDA 3DGS kernel does, so nothing per pair is stored and a tile stops as soon as all its
+pixels are finished. A kernel "tile" is a block of whole binning tiles (`tiles.BLOCK_PIXELS`); a pair visits only
+the pixels of its reach box (`_pixel_box`: the ellipse where alpha >= alpha_min can hold) clipped to its tile
+rectangle (`rects`, pixels), so the block size changes the work, never the pixels a Gaussian touches. All arrays
+are float64 (one compiled specialisation; the wrappers in `gaussian_renderer.compiled.ops` convert), per-Gaussian
+sums go to one buffer per slice, added up at the end (`_sum_slices`).
 
 Compositing rules (identical to `gaussian_renderer.rasterize`): a pair is skipped where power > 0 or
 alpha = min(alpha_max, o exp(power)) < alpha_min; a pixel stops before the pair that would take its
@@ -65,18 +65,6 @@ def bin_tiles(x0, x1, y0, y1, gids, num_tiles, tiles_x, num_slices):
     return offsets, ids
 
 
-@njit(cache=True)
-def _pixel_offsets(tile_size):
-    """Pixel centre offsets inside a tile (float64) and integer offsets, each [tile_size^2]."""
-    num_px = tile_size * tile_size
-    fx, fy = np.empty(num_px), np.empty(num_px)
-    ix, iy = np.empty(num_px, np.int64), np.empty(num_px, np.int64)
-    for p in range(num_px):
-        ix[p], iy[p] = p % tile_size, p // tile_size
-        fx[p], fy[p] = ix[p] + 0.5, iy[p] + 0.5
-    return fx, fy, ix, iy
-
-
 BOX_MARGIN = 1e-6  # px added to the pixel box's half-widths, so rounding never drops a pixel the tests pass
 
 
@@ -112,109 +100,6 @@ def _pair_box(geom, rects, g, px0, py0, tile_size):
     x_lo, x_hi, y_lo, y_hi = _pixel_box(mx, my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 6], tile_size)
     return (max(x_lo, rects[g, 0] - px0), min(x_hi, rects[g, 1] - px0), max(y_lo, rects[g, 2] - py0),
             min(y_hi, rects[g, 3] - py0))
-
-
-@njit(inline="always", cache=True)
-def _pair_alpha(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max):
-    """(gauss, raw = o gauss, alpha) of a pair at pixel offset (dx, dy); alpha = 0 where the pair is skipped
-    (power > 0, power below the cut, or alpha < alpha_min). The one copy of the compositing test."""
-    power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-    if power > 0.0 or power < cut:
-        return 0.0, 0.0, 0.0
-    gauss = math.exp(power)
-    raw = o * gauss
-    alpha = min(alpha_max, raw)
-    if alpha < alpha_min:
-        return gauss, raw, 0.0
-    return gauss, raw, alpha
-
-
-@njit(inline="always", cache=True)
-def _load_tile(px0, py0, ix, iy, width, height, trans_final, last_in, trans, last):
-    """Fill trans / last [P] of the tile at (px0, py0) from the forward pass (last = 0 for pixels outside the
-    image); returns the tile's longest replay (max last)."""
-    longest = 0
-    for p in range(ix.shape[0]):
-        x, y = px0 + ix[p], py0 + iy[p]
-        last[p] = 0
-        if x < width and y < height:
-            trans[p] = trans_final[y, x]
-            last[p] = last_in[y, x]
-            longest = max(longest, last[p])
-    return longest
-
-
-@njit(parallel=True, cache=True)
-def backward(offsets, ids, rects, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
-             trans_final, last_in, grad_image, grad_alpha, num_slices):
-    """Back-to-front replay. Returns per-Gaussian gradients [N, 6 + D]: mean x, y, conic a, b, c, opacity,
-    colour[D] (for loss gradients grad_image [D, H, W] and grad_alpha [H, W])."""
-    n, d = colors.shape
-    num_tiles = offsets.shape[0] - 1
-    fx, fy, ix, iy = _pixel_offsets(tile_size)
-    num_px = fx.shape[0]
-    buf = np.zeros((num_slices, n, GEO + d))
-    for sl in prange(num_slices):  # interleaved tiles, one gradient buffer per slice
-        trans = np.empty(num_px)
-        behind = np.empty(num_px)  # g . (colour behind the current pair) - dL/dalpha_out T_final
-        gpix = np.empty((num_px, d))
-        last = np.empty(num_px, np.int32)
-        gcol = np.empty(d)
-        for t in range(sl, num_tiles, num_slices):
-            px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
-            longest = _load_tile(px0, py0, ix, iy, width, height, trans_final, last_in, trans, last)
-            for p in range(num_px):
-                x, y = px0 + ix[p], py0 + iy[p]
-                if x < width and y < height:
-                    gb = 0.0
-                    for ch in range(d):
-                        gpix[p, ch] = grad_image[ch, y, x]
-                        gb += gpix[p, ch] * background[ch]
-                    behind[p] = trans[p] * (gb - grad_alpha[y, x])
-            start = offsets[t]
-            for j in range(longest - 1, -1, -1):
-                g = ids[start + j]
-                mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-                ca, cb, cc, o, cut = geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6]
-                s_x = s_y = s_xx = s_xy = s_yy = s_o = 0.0
-                gcol[:] = 0.0
-                x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
-                for base in range(y_lo * tile_size, y_hi * tile_size + 1, tile_size):
-                    for p in range(base + x_lo, base + x_hi + 1):
-                        if j >= last[p]:
-                            continue
-                        dx, dy = fx[p] - mx, fy[p] - my
-                        gauss, raw, alpha = _pair_alpha(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
-                        if alpha == 0.0:
-                            continue
-                        inv = 1.0 / (1.0 - alpha)
-                        t_front = trans[p] * inv
-                        w = alpha * t_front
-                        gc = 0.0
-                        for ch in range(d):
-                            gc += gpix[p, ch] * colors[g, ch]
-                            gcol[ch] += w * gpix[p, ch]
-                        if raw < alpha_max:
-                            dl_dalpha = gc * t_front - behind[p] * inv
-                            la = dl_dalpha * alpha
-                            lx, ly = la * dx, la * dy
-                            s_x += lx
-                            s_y += ly
-                            s_xx += lx * dx
-                            s_xy += lx * dy
-                            s_yy += ly * dy
-                            s_o += dl_dalpha * gauss
-                        behind[p] += w * gc
-                        trans[p] = t_front
-                buf[sl, g, 0] += ca * s_x + cb * s_y
-                buf[sl, g, 1] += cb * s_x + cc * s_y
-                buf[sl, g, 2] += -0.5 * s_xx
-                buf[sl, g, 3] += -s_xy
-                buf[sl, g, 4] += -0.5 * s_yy
-                buf[sl, g, 5] += s_o
-                for ch in range(d):
-                    buf[sl, g, GEO + ch] += gcol[ch]
-    return _sum_slices(buf)
 
 
 @njit(parallel=True, cache=True)

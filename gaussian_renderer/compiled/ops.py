@@ -130,7 +130,7 @@ class _RasterizeCompiled(torch.autograd.Function):
         means2d, conics, opacities, colors, background = ctx.saved_tensors
         bins, width, height, settings, trans, last = ctx.state
         g_img, g_alpha = grad_image.double(), grad_alpha.double()  # [D, H, W], [H, W] (materialised by autograd)
-        out = kernels.backward(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height,
+        out = row_kernels.backward(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height,
                                              settings), trans.numpy(), last.numpy(), _float64(g_img), _float64(g_alpha),
                                _use_torch_threads())
         grad = torch.from_numpy(out).to(means2d.dtype)  # [N, 6 + D]

@@ -1,11 +1,11 @@
-"""Row-vectorised numba kernels: the forward compositing and the Fisher moment sums (`gram`).
+"""Row-vectorised numba kernels: forward compositing, its backward, and the Fisher moment sums (`gram`).
 
 Same tiles, lists, pixel boxes and compositing rules as `kernels` (its module docstring), but a pair's pixels
 are processed one box row at a time by a separate, non-inlined function whose loop LLVM turns into SIMD code
 (4 float64 lanes): every test is a select instead of a branch, so the lanes past the row's end (the row is
 rounded up to a multiple of `LANES`) and the lanes a test rejects are computed and then discarded. For that:
 
-- tile state lives in padded rows (`row_stride`), so a rounded-up row never reaches the next one;
+- tile state lives in padded rows (tile_size + LANES long), so a rounded-up row never reaches the next one;
 - exp comes from `exp_neg`, a polynomial that vectorises (numba's exp is a libm call that does not);
 - `not (x > y)` rather than `x <= y` wherever the scalar kernels skip on a comparison, so NaN inputs take the
   same path (and reach the image) as there.
@@ -45,19 +45,15 @@ def exp_neg(x):
     return p
 
 
-def row_stride(tile_size: int) -> int:
-    """Padded row length of a tile's state: room for a row rounded up to LANES from any start."""
-    return tile_size + LANES
-
-
 @njit(inline="always", cache=True)
 def _alpha_lane(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max):
-    """(alpha, hit, unclamped) of a pair at one pixel: `kernels._pair_alpha`'s tests as selects."""
+    """(gauss, alpha, hit, unclamped) of a pair at one pixel: the compositing tests of `kernels` as selects."""
     power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-    raw = o * exp_neg(EXP_MIN if power < EXP_MIN else power)
+    gauss = exp_neg(EXP_MIN if power < EXP_MIN else power)
+    raw = o * gauss
     alpha = alpha_max if raw > alpha_max else raw
     hit = (not power > 0.0) & (not power < cut) & (not alpha < alpha_min) & (alpha != 0.0)
-    return alpha, hit, raw < alpha_max
+    return gauss, alpha, hit, raw < alpha_max
 
 
 @njit(fastmath={"contract"}, error_model="numpy", inline="never", cache=True)
@@ -69,7 +65,7 @@ def _forward_row(trans, live, last, weight, color, cg, a, n, m, x0, pos, mx, dy,
     stopped = 0
     for i in range(m):
         j = a + i
-        alpha, hit, _ = _alpha_lane(np.float64(i) + x0 - mx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
+        _, alpha, hit, _ = _alpha_lane(np.float64(i) + x0 - mx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
         hit = hit & (i < n) & (live[j] > 0.0)
         tp = trans[j]
         test = tp * (1.0 - alpha)
@@ -144,7 +140,7 @@ def _gram_row_lanes(trans, last, behind, cg, a, n, m, x0, pos, mx, dy, ca, cb, c
     pair where it contributes."""
     for i in range(m):
         j = a + i
-        alpha, hit, unclamped = _alpha_lane(np.float64(i) + x0 - mx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
+        _, alpha, hit, unclamped = _alpha_lane(np.float64(i) + x0 - mx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
         hit = hit & (i < n) & (pos < last[j])
         inv = 1.0 / (1.0 - alpha)
         lane[0, i] = 1.0 if hit else 0.0
@@ -288,3 +284,129 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
                     row[k] += acc[k]
     return _sum_slices(buf)
 
+
+
+BACK_ROWS = 7  # scratch rows of `_backward_row_lanes`: hit, unclamped, alpha, gauss, w, g . colour, dL/dalpha
+
+
+@njit(fastmath={"contract"}, error_model="numpy", inline="never", cache=True)
+def _backward_row_lanes(trans, last, behind, gpix, cg, a, n, m, x0, pos, mx, dy, ca, cb, cc, o, cut, alpha_min,
+                        alpha_max, lane):
+    """Replay one pair over a box row back to front for the loss gradient (see `backward`): fills lane [7, m] (the
+    rows named by BACK_ROWS) and steps trans / behind [*] to the front of the pair where it contributes."""
+    for i in range(m):
+        j = a + i
+        gauss, alpha, hit, unclamped = _alpha_lane(np.float64(i) + x0 - mx, dy, ca, cb, cc, o, cut, alpha_min,
+                                                   alpha_max)
+        hit = hit & (i < n) & (pos < last[j])
+        lane[0, i] = 1.0 if hit else 0.0
+        lane[1, i] = 1.0 if hit & unclamped else 0.0
+        lane[2, i] = alpha
+        lane[3, i] = gauss
+        lane[5, i] = 0.0
+    for ch in range(cg.shape[0]):
+        c = cg[ch]
+        for i in range(m):
+            lane[5, i] += gpix[ch, a + i] * c
+    for i in range(m):
+        j = a + i
+        alpha = lane[2, i]
+        inv = 1.0 / (1.0 - alpha)
+        t_front = trans[j] * inv
+        w = alpha * t_front
+        lane[4, i] = w
+        lane[6, i] = lane[5, i] * t_front - behind[j] * inv
+        take = lane[0, i] > 0.0
+        behind[j] += w * lane[5, i] if take else 0.0
+        trans[j] = t_front if take else trans[j]
+
+
+@njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
+def _backward_row_sums(lane, gpix, a, m, x0, mx, dy, d, acc):
+    """Add one row's lanes (from `_backward_row_lanes`) to the pair's sums acc [6 + D]: alpha-weighted dL/dalpha
+    moments x, y, xx, xy, yy, the opacity sum, then the colour gradient sum_p w g_p."""
+    s_x = s_y = s_xx = s_xy = s_yy = s_o = 0.0
+    for i in range(m):
+        dx = np.float64(i) + x0 - mx
+        on = lane[1, i] > 0.0
+        la = lane[6, i] * lane[2, i] if on else 0.0
+        lx, ly = la * dx, la * dy
+        s_x += lx
+        s_y += ly
+        s_xx += lx * dx
+        s_xy += lx * dy
+        s_yy += ly * dy
+        s_o += lane[6, i] * lane[3, i] if on else 0.0
+    acc[0] += s_x
+    acc[1] += s_y
+    acc[2] += s_xx
+    acc[3] += s_xy
+    acc[4] += s_yy
+    acc[5] += s_o
+    for ch in range(d):
+        col = 0.0
+        for i in range(m):
+            col += lane[4, i] * gpix[ch, a + i] if lane[0, i] > 0.0 else 0.0
+        acc[GEO + ch] += col
+
+
+@njit(parallel=True, cache=True)
+def backward(offsets, ids, rects, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
+             trans_final, last_in, grad_image, grad_alpha, num_slices):
+    """Back-to-front replay, row-vectorised. Returns per-Gaussian gradients [N, 6 + D]: mean x, y, conic a, b, c,
+    opacity, colour[D] (for loss gradients grad_image [D, H, W] and grad_alpha [H, W])."""
+    n, d = colors.shape
+    num_tiles = offsets.shape[0] - 1
+    stride = tile_size + LANES
+    num_px = tile_size * stride
+    buf = np.zeros((num_slices, n, GEO + d))
+    for sl in prange(num_slices):  # interleaved tiles, one gradient buffer per slice
+        trans = np.ones(num_px)
+        behind = np.zeros(num_px)  # g . (colour behind the current pair) - dL/dalpha_out T_final
+        gpix = np.zeros((d, num_px))
+        last = np.zeros(num_px, np.int32)
+        lane = np.empty((BACK_ROWS, stride))
+        acc = np.empty(GEO + d)
+        for t in range(sl, num_tiles, num_slices):
+            px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
+            last[:] = 0
+            longest = 0
+            for y in range(min(tile_size, height - py0)):
+                for x in range(min(tile_size, width - px0)):
+                    p = y * stride + x
+                    trans[p] = trans_final[py0 + y, px0 + x]
+                    last[p] = last_in[py0 + y, px0 + x]
+                    longest = max(longest, last[p])
+                    gb = 0.0
+                    for ch in range(d):
+                        gpix[ch, p] = grad_image[ch, py0 + y, px0 + x]
+                        gb += gpix[ch, p] * background[ch]
+                    behind[p] = trans[p] * (gb - grad_alpha[py0 + y, px0 + x])
+            start = offsets[t]
+            for j in range(longest - 1, -1, -1):
+                g = ids[start + j]
+                x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
+                if x_hi < x_lo:
+                    continue
+                mx, my = geom[g, 0] - px0, geom[g, 1] - py0
+                cnt = np.uint64(x_hi - x_lo + 1)
+                m = (cnt + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
+                acc[:] = 0.0
+                for y in range(y_lo, y_hi + 1):
+                    a = np.uint64(y * stride + x_lo)
+                    dy = y + 0.5 - my
+                    _backward_row_lanes(trans, last, behind, gpix, colors[g], a, cnt, m, x_lo + 0.5, np.int32(j), mx,
+                                        dy, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
+                                        alpha_max, lane)
+                    _backward_row_sums(lane, gpix, a, m, x_lo + 0.5, mx, dy, d, acc)
+                ca, cb, cc = geom[g, 2], geom[g, 3], geom[g, 4]
+                row = buf[sl, g]
+                row[0] += ca * acc[0] + cb * acc[1]
+                row[1] += cb * acc[0] + cc * acc[1]
+                row[2] += -0.5 * acc[2]
+                row[3] += -acc[3]
+                row[4] += -0.5 * acc[4]
+                row[5] += acc[5]
+                for ch in range(d):
+                    row[GEO + ch] += acc[GEO + ch]
+    return _sum_slices(buf)

@@ -202,10 +202,19 @@ def _attribute_gram(gaussians: GaussianModel, camera: Camera, background: torch.
     the Gaussians the view sees (`seen_attribute_gram`)."""
     proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, camera.viewmat,
                              camera.intrinsics, camera.width, camera.height)
-    colors = sh_to_colors(gaussians.sh_coeffs, gaussians.means, camera.camera_center, gaussians.active_sh_degree)
+    # only the projected Gaussians take part (colours, binning, the kernels' per-Gaussian buffers): [n] ids, in order,
+    # so the depth sort's ties fall as over all of them and the Grams are the same
+    ids = torch.nonzero(proj.radii > 0).squeeze(1)
+    means = gaussians.means[ids]
+    colors = sh_to_colors(gaussians.sh_coeffs[ids], means, camera.camera_center, gaussians.active_sh_degree)
     gram_of = seen_attribute_gram if seen_only else attribute_gram
-    return gram_of(proj.means2d, proj.conics, gaussians.opacities, colors, proj.depths, proj.radii,
-                   camera.width, camera.height, background, settings)
+    out = gram_of(proj.means2d[ids], proj.conics[ids], gaussians.opacities[ids], colors, proj.depths[ids],
+                  proj.radii[ids], camera.width, camera.height, background, settings)
+    if seen_only:
+        return ids[out[0]], out[1]
+    full = out.new_zeros(gaussians.num_gaussians, *out.shape[1:])  # [N, A, A]
+    full[ids] = out
+    return full
 
 
 def _projection_jacobian(gaussians: GaussianModel, camera: Camera, param_groups: tuple[str, ...], backend: str,

@@ -158,3 +158,27 @@ def test_non_finite_model_is_one_line_error():
         gaussians.params["sh_dc"][7, 0, 1] = float("nan")
     with pytest.raises(UserError, match="view Fisher blocks of 80 Gaussians contain NaN or inf"):
         fisher_view_factors(gaussians, cams[0], BG, SETTINGS)
+
+
+@pytest.mark.parametrize("backend", ["torch", "compiled"])
+def test_view_gram_over_the_projected_gaussians_equals_the_gram_over_all(backend):
+    """`fisher._attribute_gram` renders only the Gaussians the view projects (radii > 0); the Grams, dense and seen,
+    equal `attribute_gram` over the whole model, culled rows zero (some are culled in this view)."""
+    from active.fisher import _attribute_gram
+    from gaussian_renderer import attribute_gram
+    from gaussian_renderer.projection import project_gaussians
+    from gaussian_renderer.sh import sh_to_colors
+    gaussians, cam = model(), cameras()[0]
+    settings = RasterSettings(tile_size=8, chunk_size=8, backend=backend)
+    with torch.no_grad():
+        proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, cam.viewmat,
+                                 cam.intrinsics, W, H)
+        colors = sh_to_colors(gaussians.sh_coeffs, gaussians.means, cam.camera_center, 1)
+        expected = attribute_gram(proj.means2d, proj.conics, gaussians.opacities, colors, proj.depths, proj.radii,
+                                  W, H, BG, settings)  # [N, A, A]
+        dense = _attribute_gram(gaussians, cam, BG, settings)
+        indices, seen = _attribute_gram(gaussians, cam, BG, settings, seen_only=True)
+    assert 0 < int((proj.radii > 0).sum()) < gaussians.num_gaussians
+    torch.testing.assert_close(dense, expected, rtol=1e-12, atol=1e-12 * float(expected.abs().max()))
+    assert (expected.flatten(1).abs().sum(1) > 0).nonzero().squeeze(1).tolist() == indices.tolist()
+    torch.testing.assert_close(seen, expected[indices], rtol=1e-12, atol=1e-12 * float(expected.abs().max()))

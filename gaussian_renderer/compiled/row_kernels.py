@@ -1,16 +1,18 @@
 """Row-vectorised numba kernels: forward compositing, its backward, and the Fisher moment sums (`gram`).
 
-Same tiles, lists, pixel boxes and compositing rules as `kernels` (its module docstring), but a pair's pixels
-are processed one box row at a time by a separate, non-inlined function whose loop LLVM turns into SIMD code
-(4 float64 lanes): every test is a select instead of a branch, so the lanes past the row's end (the row is
-rounded up to a multiple of `LANES`) and the lanes a test rejects are computed and then discarded. For that:
+Same tiles, lists, pixel boxes and compositing rules as `kernels` (its module docstring), but each pair's box is
+handed to a separate, non-inlined function (`_forward_box`, `_gram_box`, `_backward_box`) whose loop over a box
+row LLVM turns into SIMD code (4 float64 lanes): every test is a select instead of a branch, so the lanes past the
+row's end (rows are rounded up to a multiple of `LANES`) and the lanes a test rejects are computed, then discarded.
+For that:
 
 - tile state lives in padded rows (tile_size + LANES long), so a rounded-up row never reaches the next one;
 - exp comes from `exp_neg`, a polynomial that vectorises (numba's exp is a libm call that does not);
-- `not (x > y)` rather than `x <= y` wherever the scalar kernels skip on a comparison, so NaN inputs take the
-  same path (and reach the image) as there.
+- the numpy error model (a division by zero gives inf rather than raising, which would be a branch);
+- `not (x > y)` rather than `x <= y` wherever the scalar kernels skipped on a comparison, so NaN inputs still take
+  the path that carries them into the image.
 
-Measured on the garden initialisation at 1296 x 840 (one thread, machine shared): forward 2.4 -> 0.9-1.2 s.
+Speed against the scalar kernels they replaced: docs/performance.md#row-vectorised-kernels.
 The torch path (`gaussian_renderer.rasterize`, `fisher_partials`) is the twin these are tested against.
 """
 from __future__ import annotations
@@ -57,29 +59,32 @@ def _alpha_lane(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max):
 
 
 @njit(fastmath={"contract"}, error_model="numpy", inline="never", cache=True)
-def _forward_row(trans, live, last, weight, color, cg, a, n, m, x0, pos, mx, dy, ca, cb, cc, o, cut, alpha_min,
-                 alpha_max, trans_min):
-    """Composite one pair over the n pixels of a box row starting at padded index a (m = n rounded up to LANES;
-    x0 = the first pixel's centre in the tile). Updates trans, live (1 / 0), last, color [D, *]; returns how many
-    pixels stopped. weight [m]: scratch."""
+def _forward_box(trans, live, last, weight, color, cg, a0, rows, stride, n, m, x0, pos, mx, dy0, ca, cb, cc, o, cut,
+                 alpha_min, alpha_max, trans_min):
+    """Composite one pair over its box: `rows` rows of n pixels, the first starting at padded index a0 (m = n
+    rounded up to LANES; x0, dy0 = the first pixel's centre in the tile, its y offset from the mean). Updates
+    trans, live (1 / 0), last, color [D, *]; returns how many pixels stopped. weight [m]: scratch."""
     stopped = 0
-    for i in range(m):
-        j = a + i
-        _, alpha, hit, _ = _alpha_lane(np.float64(i) + x0 - mx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
-        hit = hit & (i < n) & (live[j] > 0.0)
-        tp = trans[j]
-        test = tp * (1.0 - alpha)
-        stop = hit & (test < trans_min)
-        take = hit & (not test < trans_min)
-        weight[i] = alpha * tp if take else 0.0
-        trans[j] = test if take else tp
-        live[j] = 0.0 if stop else live[j]
-        last[j] = pos if take else last[j]
-        stopped += 1 if stop else 0
-    for ch in range(cg.shape[0]):
-        c = cg[ch]
+    for r in range(rows):
+        a = a0 + r * stride
+        dy = dy0 + np.float64(r)
         for i in range(m):
-            color[ch, a + i] += weight[i] * c
+            j = a + i
+            _, alpha, hit, _ = _alpha_lane(np.float64(i) + x0 - mx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
+            hit = hit & (i < n) & (live[j] > 0.0)
+            tp = trans[j]
+            test = tp * (1.0 - alpha)
+            stop = hit & (test < trans_min)
+            take = hit & (not test < trans_min)
+            weight[i] = alpha * tp if take else 0.0
+            trans[j] = test if take else tp
+            live[j] = 0.0 if stop else live[j]
+            last[j] = pos if take else last[j]
+            stopped += 1 if stop else 0
+        for ch in range(cg.shape[0]):
+            c = cg[ch]
+            for i in range(m):
+                color[ch, a + i] += weight[i] * c
     return stopped
 
 
@@ -115,11 +120,10 @@ def forward(offsets, ids, rects, geom, colors, background, width, height, tile_s
             mx, my = geom[g, 0] - px0, geom[g, 1] - py0
             n = np.uint64(x_hi - x_lo + 1)  # unsigned indices: no negative-index wraparound to stop the vectoriser
             m = (n + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
-            for y in range(y_lo, y_hi + 1):
-                remaining -= _forward_row(trans, live, last, weight, color, colors[g], np.uint64(y * stride + x_lo),
-                                          n, m, x_lo + 0.5, np.int32(k - start + 1), mx, y + 0.5 - my, geom[g, 2],
-                                          geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min, alpha_max,
-                                          trans_min)
+            remaining -= _forward_box(trans, live, last, weight, color, colors[g], np.uint64(y_lo * stride + x_lo),
+                                      np.uint64(y_hi - y_lo + 1), np.uint64(stride), n, m, x_lo + 0.5,
+                                      np.int32(k - start + 1), mx, y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4],
+                                      geom[g, 5], geom[g, 6], alpha_min, alpha_max, trans_min)
         for y in range(min(tile_size, height - py0)):
             for x in range(min(tile_size, width - px0)):
                 p = y * stride + x
@@ -132,7 +136,7 @@ def forward(offsets, ids, rects, geom, colors, background, width, height, tile_s
 LANE_ROWS = 6  # scratch rows of `_gram_row` before the colour channels: valid, unclamped, alpha, inv, t_front, |u|^2
 
 
-@njit(fastmath={"contract"}, error_model="numpy", inline="never", cache=True)
+@njit(inline="always", cache=True)
 def _gram_row_lanes(trans, last, behind, cg, a, n, m, x0, pos, mx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max,
                     lane):
     """Replay one pair over a box row back to front (see `gram`): per lane, fills lane [6 + D, m] (the
@@ -161,7 +165,7 @@ def _gram_row_lanes(trans, last, behind, cg, a, n, m, x0, pos, mx, dy, ca, cb, c
         trans[a + i] = lane[4, i] if lane[0, i] > 0.0 else trans[a + i]
 
 
-@njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
+@njit(inline="always", cache=True)
 def _gram_row_sums(lane, wpix, a, m, x0, mx, dy, d, acc):
     """Add one row's lanes (from `_gram_row_lanes`) to the pair's sums acc [15 + 6 D + 1] in `gram`'s order:
     the 15 moments of s = w_p |u|^2 alpha^2, the cross sums of q u (q = w_p w alpha), sum w_p w^2."""
@@ -224,6 +228,20 @@ def _gram_row_sums(lane, wpix, a, m, x0, mx, dy, d, acc):
         acc[NUM_MOMENTS + 5 * d + ch] += c_1
 
 
+@njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
+def _gram_box(trans, last, behind, wpix, cg, a0, rows, stride, n, m, x0, pos, mx, dy0, ca, cb, cc, o, cut, alpha_min,
+              alpha_max, lane, acc):
+    """One pair's replay over its box (`rows` rows of n pixels from padded index a0, the first row dy0 below the
+    mean): `_gram_row_lanes` then `_gram_row_sums` per row, adding to acc."""
+    d = cg.shape[0]
+    for r in range(rows):
+        a = a0 + r * stride
+        dy = dy0 + np.float64(r)
+        _gram_row_lanes(trans, last, behind, cg, a, n, m, x0, pos, mx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max,
+                        lane)
+        _gram_row_sums(lane, wpix, a, m, x0, mx, dy, d, acc)
+
+
 @njit(parallel=True, cache=True)
 def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
          trans_final, last_in, pixel_weights, num_slices):
@@ -272,13 +290,10 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
                 cnt = np.uint64(x_hi - x_lo + 1)
                 m = (cnt + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
                 acc[:] = 0.0
-                for y in range(y_lo, y_hi + 1):
-                    a = np.uint64(y * stride + x_lo)
-                    dy = y + 0.5 - my
-                    _gram_row_lanes(trans, last, behind, colors[g], a, cnt, m, x_lo + 0.5, np.int32(j), mx, dy,
-                                    geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
-                                    alpha_max, lane)
-                    _gram_row_sums(lane, wpix, a, m, x_lo + 0.5, mx, dy, d, acc)
+                _gram_box(trans, last, behind, wpix, colors[g], np.uint64(y_lo * stride + x_lo),
+                          np.uint64(y_hi - y_lo + 1), np.uint64(stride), cnt, m, x_lo + 0.5, np.int32(j), mx,
+                          y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
+                          alpha_max, lane, acc)
                 row = buf[sl, g]
                 for k in range(row_len):
                     row[k] += acc[k]
@@ -289,7 +304,7 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
 BACK_ROWS = 7  # scratch rows of `_backward_row_lanes`: hit, unclamped, alpha, gauss, w, g . colour, dL/dalpha
 
 
-@njit(fastmath={"contract"}, error_model="numpy", inline="never", cache=True)
+@njit(inline="always", cache=True)
 def _backward_row_lanes(trans, last, behind, gpix, cg, a, n, m, x0, pos, mx, dy, ca, cb, cc, o, cut, alpha_min,
                         alpha_max, lane):
     """Replay one pair over a box row back to front for the loss gradient (see `backward`): fills lane [7, m] (the
@@ -321,7 +336,7 @@ def _backward_row_lanes(trans, last, behind, gpix, cg, a, n, m, x0, pos, mx, dy,
         trans[j] = t_front if take else trans[j]
 
 
-@njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
+@njit(inline="always", cache=True)
 def _backward_row_sums(lane, gpix, a, m, x0, mx, dy, d, acc):
     """Add one row's lanes (from `_backward_row_lanes`) to the pair's sums acc [6 + D]: alpha-weighted dL/dalpha
     moments x, y, xx, xy, yy, the opacity sum, then the colour gradient sum_p w g_p."""
@@ -348,6 +363,20 @@ def _backward_row_sums(lane, gpix, a, m, x0, mx, dy, d, acc):
         for i in range(m):
             col += lane[4, i] * gpix[ch, a + i] if lane[0, i] > 0.0 else 0.0
         acc[GEO + ch] += col
+
+
+@njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
+def _backward_box(trans, last, behind, gpix, cg, a0, rows, stride, n, m, x0, pos, mx, dy0, ca, cb, cc, o, cut,
+                  alpha_min, alpha_max, lane, acc):
+    """One pair's gradient replay over its box (as `_gram_box`): `_backward_row_lanes` then `_backward_row_sums`
+    per row, adding to acc."""
+    d = cg.shape[0]
+    for r in range(rows):
+        a = a0 + r * stride
+        dy = dy0 + np.float64(r)
+        _backward_row_lanes(trans, last, behind, gpix, cg, a, n, m, x0, pos, mx, dy, ca, cb, cc, o, cut, alpha_min,
+                            alpha_max, lane)
+        _backward_row_sums(lane, gpix, a, m, x0, mx, dy, d, acc)
 
 
 @njit(parallel=True, cache=True)
@@ -392,13 +421,10 @@ def backward(offsets, ids, rects, geom, colors, background, width, height, tile_
                 cnt = np.uint64(x_hi - x_lo + 1)
                 m = (cnt + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
                 acc[:] = 0.0
-                for y in range(y_lo, y_hi + 1):
-                    a = np.uint64(y * stride + x_lo)
-                    dy = y + 0.5 - my
-                    _backward_row_lanes(trans, last, behind, gpix, colors[g], a, cnt, m, x_lo + 0.5, np.int32(j), mx,
-                                        dy, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
-                                        alpha_max, lane)
-                    _backward_row_sums(lane, gpix, a, m, x_lo + 0.5, mx, dy, d, acc)
+                _backward_box(trans, last, behind, gpix, colors[g], np.uint64(y_lo * stride + x_lo),
+                              np.uint64(y_hi - y_lo + 1), np.uint64(stride), cnt, m, x_lo + 0.5, np.int32(j), mx,
+                              y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
+                              alpha_max, lane, acc)
                 ca, cb, cc = geom[g, 2], geom[g, 3], geom[g, 4]
                 row = buf[sl, g]
                 row[0] += ca * acc[0] + cb * acc[1]

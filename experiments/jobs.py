@@ -21,6 +21,7 @@ from typing import Any
 
 from submitit.helpers import Checkpointable
 
+from utils.io import atomic_write
 from utils.model_dir import CFG_ARGS, CHECKPOINTS_DIR, RESULTS, RUN_STATUS, method_name, render_dir
 
 log = logging.getLogger(__name__)
@@ -33,6 +34,28 @@ def read_json(path: Path) -> Any:
         return json.loads(path.read_text())
     except (OSError, ValueError):
         return None
+
+
+JOB_TIMES = "grid_job_seconds.json"  # in a run's directory: one record per grid job invocation that ran a step
+
+
+def record_job_time(model_dir: Path, seconds: float, state: str) -> None:
+    """Append this invocation's wall seconds (train + render + metrics steps it ran) to the run's JOB_TIMES, so a
+    run resumed by a later grid invocation keeps the time of every attempt."""
+    records = read_json(model_dir / JOB_TIMES)
+    records = records if isinstance(records, list) else []
+    records.append({"seconds": round(seconds, 3), "state": state, "ended": time.strftime("%Y-%m-%d %H:%M:%S")})
+    text = json.dumps(records, indent=1)
+    atomic_write(model_dir / JOB_TIMES, lambda tmp: Path(tmp).write_text(text))
+
+
+def recorded_job_seconds(model_dir: Path) -> float | None:
+    """Wall seconds of every grid job invocation that worked on the run (JOB_TIMES), None without a record."""
+    records = read_json(model_dir / JOB_TIMES)
+    if not isinstance(records, list):
+        return None
+    seconds = [r["seconds"] for r in records if isinstance(r, dict) and isinstance(r.get("seconds"), (int, float))]
+    return float(sum(seconds)) if seconds else None
 
 
 def trained_iteration(model_dir: Path) -> int | None:
@@ -98,7 +121,8 @@ class JobSpec:
 
 
 class GridJob(Checkpointable):
-    """Callable run by submitit (or inline): returns {"state": "done"|"failed", "error", "seconds", "fresh"}."""
+    """Callable run by submitit (or inline): returns {"state": "done"|"failed", "error", "seconds", "fresh"}; an
+    invocation that ran a step also appends its seconds to the run's JOB_TIMES."""
 
     def __init__(self, spec: JobSpec):
         self.spec = spec
@@ -121,17 +145,21 @@ class GridJob(Checkpointable):
                 except BlockingIOError:
                     self._note(logf, "another process is running this job; waiting for it")
                     fcntl.flock(lock_fd, fcntl.LOCK_EX)
-                return {**self._steps(logf, lock_fd), "seconds": time.time() - t0}
+                outcome = self._steps(logf, lock_fd)
+                seconds = time.time() - t0
+                if outcome.pop("ran"):
+                    record_job_time(Path(spec.model_dir), seconds, outcome["state"])
+                return {**outcome, "seconds": seconds}
         finally:
             self._stop_child()
             os.close(lock_fd)
 
     def _steps(self, logf, lock_fd: int) -> dict[str, Any]:
         spec, model = self.spec, Path(self.spec.model_dir)
-        fresh = False
+        fresh = ran = False
         if is_finished(model, spec.uncertainty):
             self._note(logf, "already finished")
-            return {"state": "done", "error": "", "fresh": False}
+            return {"state": "done", "error": "", "fresh": False, "ran": False}
         env = {**os.environ, **{var: str(spec.threads) for var in THREAD_VARS}}
         for step, argv in spec.commands(self._device()):
             iteration = trained_iteration(model)
@@ -145,6 +173,7 @@ class GridJob(Checkpointable):
                              f"{spec.threads} thread(s): {subprocess.list2cmdline(argv)}")
             logf.flush()
             start = logf.tell()
+            ran = True
             # The child inherits the lock, so it stays held if this process dies while the child still works.
             self._child = subprocess.Popen(argv, stdout=logf, stderr=subprocess.STDOUT, env=env, cwd=spec.root,
                                            pass_fds=(lock_fd,))
@@ -156,8 +185,8 @@ class GridJob(Checkpointable):
                     fh.seek(start)
                     line = error_line(fh.read())
                 self._note(logf, f"{step} failed (exit {code})")
-                return {"state": "failed", "error": f"{step}: {line}", "fresh": fresh}
-        return {"state": "done", "error": "", "fresh": fresh}
+                return {"state": "failed", "error": f"{step}: {line}", "fresh": fresh, "ran": ran}
+        return {"state": "done", "error": "", "fresh": fresh, "ran": ran}
 
     def _device(self) -> str:
         if self.spec.device != "auto":

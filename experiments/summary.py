@@ -23,6 +23,7 @@ from statistics import mean, stdev
 
 from active.oracle_counts import exhaustive_count, mean_rounded_up
 from experiments.flags import RECORD as GRID_RECORD
+from experiments.jobs import recorded_job_seconds
 from experiments.progress import STATUS as GRID_STATUS
 from utils.errors import UserError
 from utils.io import atomic_write
@@ -48,7 +49,8 @@ class Run:
     cameras: list[dict] = field(default_factory=list)  # cameras.json (test cameras, then train cameras)
     problem: str = ""  # why the run has no results yet ("" when complete)
     sessions: list[dict] = field(default_factory=list)  # selection.json "sessions": code, machine, date per start
-    job_seconds: float | None = None  # train + render + metrics wall time of its grid job (grid_status.json)
+    job_seconds: float | None = None  # train + render + metrics wall time of its grid jobs (JOB_TIMES, else
+    # grid_status.json's last invocation)
 
     @property
     def options_label(self) -> str:
@@ -132,8 +134,9 @@ def find_runs(roots: list[str]) -> list[Run]:
     seconds: dict[Path, float] = {}  # every grid's finished jobs, read once per grid
     for grid_dir in {d for r in runs if (d := grid_dir_of(r)) is not None}:
         seconds.update(done_job_seconds(_grid_status(grid_dir)))
-    for run in runs:
-        run.job_seconds = seconds.get(run.path.resolve())
+    for run in runs:  # the run's own record of every invocation, else its grid's last invocation
+        recorded = recorded_job_seconds(run.path)
+        run.job_seconds = recorded if recorded is not None else seconds.get(run.path.resolve())
     return runs
 
 

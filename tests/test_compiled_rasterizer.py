@@ -40,6 +40,8 @@ CASES = {  # name: (scene factory, width, height, tile size)
     "many_tile8": (lambda dt: random_2d_scene(200, 33, 29, seed=2, dtype=dt), 33, 29, 8),
     "early_stop_clamped": (lambda dt: stacked_scene(dtype=dt), 8, 8, 4),
     "empty_tiles": (lambda dt: corner_scene(dtype=dt), 40, 36, 4),
+    "block15_tile3": (lambda dt: random_2d_scene(60, 31, 23, seed=4, dtype=dt), 31, 23, 3),  # rows of 15 + padding
+    "block32_tile32": (lambda dt: random_2d_scene(60, 45, 37, seed=5, dtype=dt), 45, 37, 32),  # one tile per block
 }
 
 

@@ -175,6 +175,10 @@ def test_skip_resume_failure_and_flag_mismatch(tmp_path):
     assert r.stdout.count("failed] ship/") == 4 and "[4/4, 0 failed]" in r.stdout and "ETA" in r.stdout
     assert "| setup1 | pop_gs K=3 | ship | 2 | 0 |" in (root / "summary.md").read_text()
 
+    def job_times(key):  # the states of a run's grid job invocations that worked on it
+        return [r["state"] for r in json.loads((root / key / "grid_job_seconds.json").read_text())]
+    assert all(job_times(k) == ["done"] for k in keys)
+
     # Rerun: finished jobs are skipped, one without results.json is rerun from its metrics step, a failing one
     # does not stop the others; the exit status is the number of failed jobs.
     log.unlink()
@@ -196,6 +200,8 @@ def test_skip_resume_failure_and_flag_mismatch(tmp_path):
     failed = next(j for j in status["jobs"] if j["state"] == "failed")
     assert failed["error"].startswith("train: error: fake failure") and failed["log"].endswith("pop_gs/seed0.log")
     assert "--method pop_gs" in failed["command"]
+    assert job_times("ship/pop_gs/seed0") == ["done", "failed"] and job_times("ship/lite_gs/seed1") == ["done", "done"]
+    assert job_times("ship/pop_gs/seed1") == ["done"]  # skipped: no invocation worked on it
 
     # Other flags on the same output directory: refused, naming the flag; nothing runs.
     log.unlink()

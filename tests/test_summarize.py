@@ -231,3 +231,21 @@ def test_provenance_counts_machines_codes_and_resumes(tmp_path):
     summarize.write_outputs(runs, tmp_path / "summary")
     md = (tmp_path / "summary" / "summary.md").read_text()
     assert "## Provenance" in md and "- grid `setup1`" in md and "| 1.5 ± 0.7 |" in md
+
+
+def test_job_minutes_sum_every_invocation_that_worked_on_a_run(tmp_path):
+    """A run's grid_job_seconds.json (one record per grid job invocation that ran a step) beats grid_status.json's
+    last invocation, which for a run finished earlier says ~0 s ("already finished")."""
+    from experiments.jobs import JOB_TIMES, record_job_time, recorded_job_seconds
+    grid = tmp_path / "out" / "setup1"
+    model = make_run(tmp_path / "out", "setup1", "lego", "pop_gs", 0, "pop_gs", 3, 0.1, [(4, 4)], (20.0, 0.8, 0.2))
+    (grid / "grid.json").write_text(json.dumps({"resolution": 8, "iter_scale": 0.1, "stage_scale": None,
+                                                "num_points": 3000, "train_args": []}))
+    (grid / "grid_status.json").write_text(json.dumps({"jobs": [{"model_dir": str(model), "state": "done",
+                                                                 "seconds": 0.2}]}))
+    assert recorded_job_seconds(model) is None
+    assert summarize.find_runs([str(tmp_path / "out")])[0].job_seconds == 0.2  # no record: the grid's status
+    record_job_time(model, 100.0, "failed")  # interrupted, then resumed by a later invocation
+    record_job_time(model, 50.0, "done")
+    assert [r["state"] for r in json.loads((model / JOB_TIMES).read_text())] == ["failed", "done"]
+    assert summarize.find_runs([str(tmp_path / "out")])[0].job_seconds == 150.0

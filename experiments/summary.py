@@ -393,7 +393,8 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
           markdown_table(oracles, digits),
           "## Selection wall time (seconds)", "",
           "select_s = selection time per acquisition step including the Fisher blocks; fisher_s = the Fisher part; "
-          "job_min = wall minutes of the run's grid job (train, render, metrics; its last invocation).",
+          "job_min = wall minutes of the run's grid jobs (train, render, metrics; every invocation that worked on it, "
+          "or its grid's last invocation for runs made before grid_job_seconds.json).",
           "", markdown_table(times, digits),
           "## Provenance", "",
           "Code commit (+changes: tracked files differed from it), machine and date of every run, as train.py "

@@ -58,6 +58,29 @@ def _alpha_lane(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max):
     return gauss, alpha, hit, raw < alpha_max
 
 
+@njit(inline="always", cache=True)
+def _box_lanes(x_lo, x_hi):
+    """(n, m) of a box row: its pixel count and that rounded up to LANES, unsigned (so indices built from them need
+    no negative-index wraparound, which would stop the vectoriser)."""
+    n = np.uint64(x_hi - x_lo + 1)
+    return n, (n + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
+
+
+@njit(inline="always", cache=True)
+def _load_replay_tile(px0, py0, width, height, tile_size, stride, trans_final, last_in, trans, last):
+    """Fill trans / last (padded rows) of the tile at (px0, py0) from the forward pass, last = 0 outside the image;
+    returns the tile's longest replay (max last)."""
+    last[:] = 0
+    longest = 0
+    for y in range(min(tile_size, height - py0)):
+        for x in range(min(tile_size, width - px0)):
+            p = y * stride + x
+            trans[p] = trans_final[py0 + y, px0 + x]
+            last[p] = last_in[py0 + y, px0 + x]
+            longest = max(longest, last[p])
+    return longest
+
+
 @njit(fastmath={"contract"}, error_model="numpy", inline="never", cache=True)
 def _forward_box(trans, live, last, weight, color, cg, a0, rows, stride, n, m, x0, pos, mx, dy0, ca, cb, cc, o, cut,
                  alpha_min, alpha_max, trans_min):
@@ -118,8 +141,7 @@ def forward(offsets, ids, rects, geom, colors, background, width, height, tile_s
             if x_hi < x_lo:
                 continue
             mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-            n = np.uint64(x_hi - x_lo + 1)  # unsigned indices: no negative-index wraparound to stop the vectoriser
-            m = (n + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
+            n, m = _box_lanes(x_lo, x_hi)
             remaining -= _forward_box(trans, live, last, weight, color, colors[g], np.uint64(y_lo * stride + x_lo),
                                       np.uint64(y_hi - y_lo + 1), np.uint64(stride), n, m, x_lo + 0.5,
                                       np.int32(k - start + 1), mx, y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4],
@@ -269,14 +291,10 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
         acc = np.empty(row_len)
         for t in range(sl, num_tiles, num_slices):
             px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
-            last[:] = 0
-            longest = 0
+            longest = _load_replay_tile(px0, py0, width, height, tile_size, stride, trans_final, last_in, trans, last)
             for y in range(min(tile_size, height - py0)):
                 for x in range(min(tile_size, width - px0)):
                     p = y * stride + x
-                    trans[p] = trans_final[py0 + y, px0 + x]
-                    last[p] = last_in[py0 + y, px0 + x]
-                    longest = max(longest, last[p])
                     wpix[p] = pixel_weights[py0 + y, px0 + x]
                     for ch in range(d):
                         behind[ch, p] = trans[p] * background[ch]
@@ -287,8 +305,7 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
                 if x_hi < x_lo:
                     continue
                 mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-                cnt = np.uint64(x_hi - x_lo + 1)
-                m = (cnt + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
+                cnt, m = _box_lanes(x_lo, x_hi)
                 acc[:] = 0.0
                 _gram_box(trans, last, behind, wpix, colors[g], np.uint64(y_lo * stride + x_lo),
                           np.uint64(y_hi - y_lo + 1), np.uint64(stride), cnt, m, x_lo + 0.5, np.int32(j), mx,
@@ -398,14 +415,10 @@ def backward(offsets, ids, rects, geom, colors, background, width, height, tile_
         acc = np.empty(GEO + d)
         for t in range(sl, num_tiles, num_slices):
             px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
-            last[:] = 0
-            longest = 0
+            longest = _load_replay_tile(px0, py0, width, height, tile_size, stride, trans_final, last_in, trans, last)
             for y in range(min(tile_size, height - py0)):
                 for x in range(min(tile_size, width - px0)):
                     p = y * stride + x
-                    trans[p] = trans_final[py0 + y, px0 + x]
-                    last[p] = last_in[py0 + y, px0 + x]
-                    longest = max(longest, last[p])
                     gb = 0.0
                     for ch in range(d):
                         gpix[ch, p] = grad_image[ch, py0 + y, px0 + x]
@@ -418,8 +431,7 @@ def backward(offsets, ids, rects, geom, colors, background, width, height, tile_
                 if x_hi < x_lo:
                     continue
                 mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-                cnt = np.uint64(x_hi - x_lo + 1)
-                m = (cnt + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
+                cnt, m = _box_lanes(x_lo, x_hi)
                 acc[:] = 0.0
                 _backward_box(trans, last, behind, gpix, colors[g], np.uint64(y_lo * stride + x_lo),
                               np.uint64(y_hi - y_lo + 1), np.uint64(stride), cnt, m, x_lo + 0.5, np.int32(j), mx,

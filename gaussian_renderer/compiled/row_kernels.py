@@ -59,11 +59,13 @@ def _alpha_lane(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max):
 
 
 @njit(inline="always", cache=True)
-def _box_lanes(x_lo, x_hi):
-    """(n, m) of a box row: its pixel count and that rounded up to LANES, unsigned (so indices built from them need
-    no negative-index wraparound, which would stop the vectoriser)."""
+def _box_layout(x_lo, x_hi, y_lo, y_hi, stride):
+    """A pair's box in the padded tile rows: (a0, rows, stride, n, m) = the first pixel's index, the row count, the
+    row stride, a row's pixel count and that rounded up to LANES; unsigned, so the indices the box functions build
+    from them need no negative-index wraparound, which would stop the vectoriser."""
     n = np.uint64(x_hi - x_lo + 1)
-    return n, (n + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
+    m = (n + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
+    return np.uint64(y_lo * stride + x_lo), np.uint64(y_hi - y_lo + 1), np.uint64(stride), n, m
 
 
 @njit(inline="always", cache=True)
@@ -141,9 +143,8 @@ def forward(offsets, ids, rects, geom, colors, background, width, height, tile_s
             if x_hi < x_lo:
                 continue
             mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-            n, m = _box_lanes(x_lo, x_hi)
-            remaining -= _forward_box(trans, live, last, weight, color, colors[g], np.uint64(y_lo * stride + x_lo),
-                                      np.uint64(y_hi - y_lo + 1), np.uint64(stride), n, m, x_lo + 0.5,
+            a0, rows, step, n, m = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
+            remaining -= _forward_box(trans, live, last, weight, color, colors[g], a0, rows, step, n, m, x_lo + 0.5,
                                       np.int32(k - start + 1), mx, y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4],
                                       geom[g, 5], geom[g, 6], alpha_min, alpha_max, trans_min)
         for y in range(min(tile_size, height - py0)):
@@ -155,7 +156,8 @@ def forward(offsets, ids, rects, geom, colors, background, width, height, tile_s
                 last_out[py0 + y, px0 + x] = last[p]
 
 
-LANE_ROWS = 6  # scratch rows of `_gram_row` before the colour channels: valid, unclamped, alpha, inv, t_front, |u|^2
+# scratch rows of `_gram_row_lanes` before the colour channels: valid, unclamped, alpha, inv, t_front, |u|^2
+LANE_ROWS = 6
 
 
 @njit(inline="always", cache=True)
@@ -305,17 +307,15 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
                 if x_hi < x_lo:
                     continue
                 mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-                cnt, m = _box_lanes(x_lo, x_hi)
+                a0, rows, step, cnt, m = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
                 acc[:] = 0.0
-                _gram_box(trans, last, behind, wpix, colors[g], np.uint64(y_lo * stride + x_lo),
-                          np.uint64(y_hi - y_lo + 1), np.uint64(stride), cnt, m, x_lo + 0.5, np.int32(j), mx,
+                _gram_box(trans, last, behind, wpix, colors[g], a0, rows, step, cnt, m, x_lo + 0.5, np.int32(j), mx,
                           y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
                           alpha_max, lane, acc)
                 row = buf[sl, g]
                 for k in range(row_len):
                     row[k] += acc[k]
     return _sum_slices(buf)
-
 
 
 BACK_ROWS = 7  # scratch rows of `_backward_row_lanes`: hit, unclamped, alpha, gauss, w, g . colour, dL/dalpha
@@ -431,12 +431,11 @@ def backward(offsets, ids, rects, geom, colors, background, width, height, tile_
                 if x_hi < x_lo:
                     continue
                 mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-                cnt, m = _box_lanes(x_lo, x_hi)
+                a0, rows, step, cnt, m = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
                 acc[:] = 0.0
-                _backward_box(trans, last, behind, gpix, colors[g], np.uint64(y_lo * stride + x_lo),
-                              np.uint64(y_hi - y_lo + 1), np.uint64(stride), cnt, m, x_lo + 0.5, np.int32(j), mx,
-                              y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
-                              alpha_max, lane, acc)
+                _backward_box(trans, last, behind, gpix, colors[g], a0, rows, step, cnt, m, x_lo + 0.5, np.int32(j),
+                              mx, y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6],
+                              alpha_min, alpha_max, lane, acc)
                 ca, cb, cc = geom[g, 2], geom[g, 3], geom[g, 4]
                 row = buf[sl, g]
                 row[0] += ca * acc[0] + cb * acc[1]

@@ -1,10 +1,12 @@
 """Row-vectorised numba kernels: forward compositing, its backward, and the Fisher moment sums (`gram`).
 
 Same tiles, lists, pixel boxes and compositing rules as `kernels` (its module docstring), but each pair's box is
-handed to a separate, non-inlined function (`_forward_box`, `_gram_box`, `_backward_box`) whose loop over a box
-row LLVM turns into SIMD code (4 float64 lanes): every test is a select instead of a branch, so the lanes past the
-row's end (rows are rounded up to a multiple of `LANES`) and the lanes a test rejects are computed, then discarded.
-For that:
+handed to a separate, non-inlined function (`_forward_box`, `_gram_box`, `_backward_box`) whose loops LLVM turns
+into SIMD code (4 float64 lanes): every test is a select instead of a branch, so padding lanes and the lanes a test
+rejects are computed, then discarded. The forward loops over each box row (rounded up to a multiple of `LANES`);
+the replays (Gram, backward), whose per-lane work is longer, first copy the box into one contiguous run of lanes
+(`_gather_box`: a box row is ~12 pixels, too short for a vector loop to pay for its set-up and hide its latency),
+make their passes over all of it, and write the updated transmittance and colour behind back. For that:
 
 - tile state lives in padded rows (tile_size + LANES long), so a rounded-up row never reaches the next one;
 - exp comes from `exp_neg`, a polynomial that vectorises (numba's exp is a libm call that does not);
@@ -140,7 +142,7 @@ def forward(offsets, ids, rects, geom, colors, background, width, height, tile_s
                 break
             g = ids[k]
             x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
-            if x_hi < x_lo:
+            if x_hi < x_lo or y_hi < y_lo:  # the reach box misses the tile
                 continue
             mx, my = geom[g, 0] - px0, geom[g, 1] - py0
             a0, rows, step, n, m = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
@@ -156,50 +158,127 @@ def forward(offsets, ids, rects, geom, colors, background, width, height, tile_s
                 last_out[py0 + y, px0 + x] = last[p]
 
 
-# scratch rows of `_gram_row_lanes` before the colour channels: valid, unclamped, alpha, inv, t_front, |u|^2
-LANE_ROWS = 6
+# rows of the box scratch (a lane per pixel of a pair's box, row-major, `_gather_box`): the pixel's offset from the
+# mean, its transmittance, valid (1 / 0), pixel weight; what the kernels compute per lane; then D rows of colour
+(BOX_DX, BOX_DY, BOX_TRANS, BOX_VALID, BOX_WPIX, BOX_HIT, BOX_ON, BOX_Q, BOX_SA, BOX_INV, BOX_FRONT, BOX_W, BOX_U2,
+ BOX_GAUSS, BOX_GC, BOX_BEHIND, BOX_ALPHA) = range(17)
+BOX_ROWS = 17
+BOX_LANES = 8  # a box's lane count is rounded up to this (the vector loops' step: 2 x 4 float64), padding invalid
 
 
 @njit(inline="always", cache=True)
-def _gram_row_lanes(trans, last, behind, cg, a, n, m, x0, pos, mx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max,
-                    lane):
-    """Replay one pair over a box row back to front (see `gram`): per lane, fills lane [6 + D, m] (the
-    rows named by LANE_ROWS, then u = dC/dalpha per channel) and steps trans / behind [D, *] to the front of the
-    pair where it contributes."""
+def _gather_box(trans, a0, rows, stride, n, x0, mx, dy0, box):
+    """Copy a pair's box (`rows` rows of n pixels from padded index a0, the first pixel x0 - mx, dy0 from the mean)
+    into contiguous lanes of box: BOX_DX, BOX_DY, BOX_TRANS; the lanes after it up to a multiple of BOX_LANES get
+    zeros there and in BOX_VALID. A box row is ~12 pixels: too short for a vector loop to hide its latency, so the
+    kernels work on the box as one run of lanes. Returns the lane count (padding included)."""
+    size = rows * n
+    m = (size + np.uint64(BOX_LANES - 1)) // np.uint64(BOX_LANES) * np.uint64(BOX_LANES)
+    for r in range(rows):
+        a, k = a0 + r * stride, r * n
+        dy = dy0 + np.float64(r)
+        for i in range(n):  # one loop per row of box: each stays a plain vectorisable copy
+            box[BOX_DX, k + i] = np.float64(i) + x0 - mx
+        for i in range(n):
+            box[BOX_DY, k + i] = dy
+        for i in range(n):
+            box[BOX_TRANS, k + i] = trans[a + i]
+    for i in range(size, m):
+        box[BOX_DX, i] = box[BOX_DY, i] = box[BOX_TRANS, i] = box[BOX_VALID, i] = 0.0
+    return m
+
+
+@njit(inline="always", cache=True)
+def _gather_row(src, a0, rows, stride, n, m, box, dst):
+    """Copy a box of the padded tile array src [*] into box row dst, as `_gather_box` lays it out (zero padding)."""
+    for r in range(rows):
+        a, k = a0 + r * stride, r * n
+        for i in range(n):
+            box[dst, k + i] = src[a + i]
+    for i in range(rows * n, m):
+        box[dst, i] = 0.0
+
+
+@njit(inline="always", cache=True)
+def _gather_valid(last, a0, rows, stride, n, pos, box):
+    """BOX_VALID of a replay: 1 where the pair (at list position pos) is before the pixel's last contributor."""
+    for r in range(rows):
+        a, k = a0 + r * stride, r * n
+        for i in range(n):
+            box[BOX_VALID, k + i] = 1.0 if pos < last[a + i] else 0.0
+
+
+@njit(inline="always", cache=True)
+def _scatter_box(trans, behind, a0, rows, stride, n, box):
+    """The Gram's write-back of a box: transmittance (front where hit) and colour behind to the padded tile rows."""
+    d = behind.shape[0]
+    for r in range(rows):
+        a, k = a0 + r * stride, r * n
+        for i in range(n):
+            trans[a + i] = box[BOX_FRONT, k + i] if box[BOX_HIT, k + i] > 0.0 else trans[a + i]
+        for ch in range(d):
+            for i in range(n):
+                behind[ch, a + i] = box[BOX_ROWS + ch, k + i]
+
+
+@njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
+def _gram_box(trans, last, behind, wpix, cg, a0, rows, stride, n, x0, pos, mx, dy0, ca, cb, cc, o, cut, alpha_min,
+              alpha_max, box, acc):
+    """One pair's replay over its box (`rows` rows of n pixels from padded index a0, the first pixel x0 - mx, dy0
+    from the mean), back to front (see `gram`): gathered into one run of lanes (a box row is ~12 pixels, too short
+    for the vector loops to hide their latency), replayed in three passes over all of them (alpha and the front
+    transmittance; per channel u, |u|^2, the colour behind and the cross sums; the moments), scattered back. Adds
+    the pair's sums to acc in `gram`'s order."""
+    d = cg.shape[0]
+    m = _gather_box(trans, a0, rows, stride, n, x0, mx, dy0, box)
+    _gather_valid(last, a0, rows, stride, n, pos, box)
+    _gather_row(wpix, a0, rows, stride, n, m, box, BOX_WPIX)
+    for ch in range(d):
+        _gather_row(behind[ch], a0, rows, stride, n, m, box, BOX_ROWS + ch)
+    ww = 0.0
     for i in range(m):
-        j = a + i
-        _, alpha, hit, unclamped = _alpha_lane(np.float64(i) + x0 - mx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
-        hit = hit & (i < n) & (pos < last[j])
+        _, alpha, hit, unclamped = _alpha_lane(box[BOX_DX, i], box[BOX_DY, i], ca, cb, cc, o, cut, alpha_min,
+                                               alpha_max)
+        hit = hit & (box[BOX_VALID, i] > 0.0)
         inv = 1.0 / (1.0 - alpha)
-        lane[0, i] = 1.0 if hit else 0.0
-        lane[1, i] = 1.0 if hit & unclamped else 0.0
-        lane[2, i] = alpha
-        lane[3, i] = inv
-        lane[4, i] = trans[j] * inv
-        lane[5, i] = 0.0
-    for ch in range(cg.shape[0]):
+        t_front = box[BOX_TRANS, i] * inv
+        w = alpha * t_front
+        wp = box[BOX_WPIX, i]
+        box[BOX_HIT, i] = 1.0 if hit else 0.0
+        box[BOX_ON, i] = 1.0 if hit & unclamped else 0.0
+        box[BOX_Q, i] = wp * w * alpha
+        box[BOX_SA, i] = wp * alpha * alpha
+        box[BOX_INV, i] = inv
+        box[BOX_FRONT, i] = t_front
+        box[BOX_W, i] = w
+        box[BOX_U2, i] = 0.0
+        ww += wp * w * w if hit else 0.0
+    acc[NUM_MOMENTS + GEO * d] += ww
+    for ch in range(d):  # X rows: x, y, xx, xy, yy, 1
         c = cg[ch]
+        c_x = c_y = c_xx = c_xy = c_yy = c_1 = 0.0
         for i in range(m):
-            j = a + i
-            u = c * lane[4, i] - behind[ch, j] * lane[3, i]
-            lane[LANE_ROWS + ch, i] = u
-            lane[5, i] += u * u
-            behind[ch, j] += lane[2, i] * lane[4, i] * c if lane[0, i] > 0.0 else 0.0
+            dx, dy = box[BOX_DX, i], box[BOX_DY, i]
+            u = c * box[BOX_FRONT, i] - box[BOX_ROWS + ch, i] * box[BOX_INV, i]
+            box[BOX_U2, i] += u * u
+            qu = box[BOX_Q, i] * u if box[BOX_ON, i] > 0.0 else 0.0
+            c_x += qu * dx
+            c_y += qu * dy
+            c_xx += qu * dx * dx
+            c_xy += qu * dx * dy
+            c_yy += qu * dy * dy
+            c_1 += qu
+            box[BOX_ROWS + ch, i] += box[BOX_W, i] * c if box[BOX_HIT, i] > 0.0 else 0.0
+        acc[NUM_MOMENTS + ch] += c_x
+        acc[NUM_MOMENTS + d + ch] += c_y
+        acc[NUM_MOMENTS + 2 * d + ch] += c_xx
+        acc[NUM_MOMENTS + 3 * d + ch] += c_xy
+        acc[NUM_MOMENTS + 4 * d + ch] += c_yy
+        acc[NUM_MOMENTS + 5 * d + ch] += c_1
+    m0 = m1 = m2 = m3 = m4 = m5 = m6 = m7 = m8 = m9 = m10 = m11 = m12 = m13 = m14 = 0.0
     for i in range(m):
-        trans[a + i] = lane[4, i] if lane[0, i] > 0.0 else trans[a + i]
-
-
-@njit(inline="always", cache=True)
-def _gram_row_sums(lane, wpix, a, m, x0, mx, dy, d, acc):
-    """Add one row's lanes (from `_gram_row_lanes`) to the pair's sums acc [15 + 6 D + 1] in `gram`'s order:
-    the 15 moments of s = w_p |u|^2 alpha^2, the cross sums of q u (q = w_p w alpha), sum w_p w^2."""
-    m0 = m1 = m2 = m3 = m4 = m5 = m6 = m7 = m8 = m9 = m10 = m11 = m12 = m13 = m14 = ww = 0.0
-    for i in range(m):
-        dx = np.float64(i) + x0 - mx
-        alpha, wp = lane[2, i], wpix[a + i]
-        w = alpha * lane[4, i]
-        ww += wp * w * w if lane[0, i] > 0.0 else 0.0
-        s = wp * lane[5, i] * alpha * alpha if lane[1, i] > 0.0 else 0.0
+        dx, dy = box[BOX_DX, i], box[BOX_DY, i]
+        s = box[BOX_SA, i] * box[BOX_U2, i] if box[BOX_ON, i] > 0.0 else 0.0
         xx, xy, yy = dx * dx, dx * dy, dy * dy
         m0 += s
         m1 += s * dx
@@ -231,39 +310,7 @@ def _gram_row_sums(lane, wpix, a, m, x0, mx, dy, d, acc):
     acc[12] += m12
     acc[13] += m13
     acc[14] += m14
-    acc[NUM_MOMENTS + GEO * d] += ww
-    for ch in range(d):
-        c_x = c_y = c_xx = c_xy = c_yy = c_1 = 0.0
-        for i in range(m):
-            dx = np.float64(i) + x0 - mx
-            qu = wpix[a + i] * lane[2, i] * lane[4, i] * lane[2, i] * lane[LANE_ROWS + ch, i] \
-                if lane[1, i] > 0.0 else 0.0
-            c_x += qu * dx
-            c_y += qu * dy
-            c_xx += qu * dx * dx
-            c_xy += qu * dx * dy
-            c_yy += qu * dy * dy
-            c_1 += qu
-        acc[NUM_MOMENTS + ch] += c_x
-        acc[NUM_MOMENTS + d + ch] += c_y
-        acc[NUM_MOMENTS + 2 * d + ch] += c_xx
-        acc[NUM_MOMENTS + 3 * d + ch] += c_xy
-        acc[NUM_MOMENTS + 4 * d + ch] += c_yy
-        acc[NUM_MOMENTS + 5 * d + ch] += c_1
-
-
-@njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
-def _gram_box(trans, last, behind, wpix, cg, a0, rows, stride, n, m, x0, pos, mx, dy0, ca, cb, cc, o, cut, alpha_min,
-              alpha_max, lane, acc):
-    """One pair's replay over its box (`rows` rows of n pixels from padded index a0, the first row dy0 below the
-    mean): `_gram_row_lanes` then `_gram_row_sums` per row, adding to acc."""
-    d = cg.shape[0]
-    for r in range(rows):
-        a = a0 + r * stride
-        dy = dy0 + np.float64(r)
-        _gram_row_lanes(trans, last, behind, cg, a, n, m, x0, pos, mx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max,
-                        lane)
-        _gram_row_sums(lane, wpix, a, m, x0, mx, dy, d, acc)
+    _scatter_box(trans, behind, a0, rows, stride, n, box)
 
 
 @njit(parallel=True, cache=True)
@@ -289,7 +336,7 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
         behind = np.zeros((d, num_px))
         wpix = np.zeros(num_px)
         last = np.zeros(num_px, np.int32)
-        lane = np.empty((LANE_ROWS + d, stride))
+        box = np.empty((BOX_ROWS + d, tile_size * tile_size + BOX_LANES))
         acc = np.empty(row_len)
         for t in range(sl, num_tiles, num_slices):
             px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
@@ -304,96 +351,80 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
             for j in range(longest - 1, -1, -1):
                 g = ids[start + j]
                 x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
-                if x_hi < x_lo:
+                if x_hi < x_lo or y_hi < y_lo:  # the reach box misses the tile
                     continue
                 mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-                a0, rows, step, cnt, m = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
+                a0, rows, step, cnt, _ = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
                 acc[:] = 0.0
-                _gram_box(trans, last, behind, wpix, colors[g], a0, rows, step, cnt, m, x_lo + 0.5, np.int32(j), mx,
+                _gram_box(trans, last, behind, wpix, colors[g], a0, rows, step, cnt, x_lo + 0.5, np.int32(j), mx,
                           y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
-                          alpha_max, lane, acc)
+                          alpha_max, box, acc)
                 row = buf[sl, g]
                 for k in range(row_len):
                     row[k] += acc[k]
     return _sum_slices(buf)
 
 
-BACK_ROWS = 7  # scratch rows of `_backward_row_lanes`: hit, unclamped, alpha, gauss, w, g . colour, dL/dalpha
-
-
-@njit(inline="always", cache=True)
-def _backward_row_lanes(trans, last, behind, gpix, cg, a, n, m, x0, pos, mx, dy, ca, cb, cc, o, cut, alpha_min,
-                        alpha_max, lane):
-    """Replay one pair over a box row back to front for the loss gradient (see `backward`): fills lane [7, m] (the
-    rows named by BACK_ROWS) and steps trans / behind [*] to the front of the pair where it contributes."""
+@njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
+def _backward_box(trans, last, behind, gpix, cg, a0, rows, stride, n, x0, pos, mx, dy0, ca, cb, cc, o, cut, alpha_min,
+                  alpha_max, box, acc):
+    """One pair's gradient replay over its box, back to front (see `backward`), as one run of lanes like `_gram_box`
+    (the pixels' loss gradients in rows BOX_ROWS + channel): adds to acc [6 + D] the alpha-weighted dL/dalpha
+    moments x, y, xx, xy, yy, the opacity sum and the colour gradient sum_p w g_p; steps trans / behind [*] to the
+    front of the pair where it contributes."""
+    d = cg.shape[0]
+    m = _gather_box(trans, a0, rows, stride, n, x0, mx, dy0, box)
+    _gather_valid(last, a0, rows, stride, n, pos, box)
+    _gather_row(behind, a0, rows, stride, n, m, box, BOX_BEHIND)
+    for ch in range(d):
+        _gather_row(gpix[ch], a0, rows, stride, n, m, box, BOX_ROWS + ch)
     for i in range(m):
-        j = a + i
-        gauss, alpha, hit, unclamped = _alpha_lane(np.float64(i) + x0 - mx, dy, ca, cb, cc, o, cut, alpha_min,
+        gauss, alpha, hit, unclamped = _alpha_lane(box[BOX_DX, i], box[BOX_DY, i], ca, cb, cc, o, cut, alpha_min,
                                                    alpha_max)
-        hit = hit & (i < n) & (pos < last[j])
-        lane[0, i] = 1.0 if hit else 0.0
-        lane[1, i] = 1.0 if hit & unclamped else 0.0
-        lane[2, i] = alpha
-        lane[3, i] = gauss
-        lane[5, i] = 0.0
-    for ch in range(cg.shape[0]):
-        c = cg[ch]
-        for i in range(m):
-            lane[5, i] += gpix[ch, a + i] * c
-    for i in range(m):
-        j = a + i
-        alpha = lane[2, i]
+        hit = hit & (box[BOX_VALID, i] > 0.0)
         inv = 1.0 / (1.0 - alpha)
-        t_front = trans[j] * inv
-        w = alpha * t_front
-        lane[4, i] = w
-        lane[6, i] = lane[5, i] * t_front - behind[j] * inv
-        take = lane[0, i] > 0.0
-        behind[j] += w * lane[5, i] if take else 0.0
-        trans[j] = t_front if take else trans[j]
-
-
-@njit(inline="always", cache=True)
-def _backward_row_sums(lane, gpix, a, m, x0, mx, dy, d, acc):
-    """Add one row's lanes (from `_backward_row_lanes`) to the pair's sums acc [6 + D]: alpha-weighted dL/dalpha
-    moments x, y, xx, xy, yy, the opacity sum, then the colour gradient sum_p w g_p."""
+        box[BOX_HIT, i] = 1.0 if hit else 0.0
+        box[BOX_ON, i] = 1.0 if hit & unclamped else 0.0
+        box[BOX_ALPHA, i] = alpha
+        box[BOX_GAUSS, i] = gauss
+        box[BOX_INV, i] = inv
+        box[BOX_W, i] = alpha * box[BOX_TRANS, i] * inv
+        box[BOX_GC, i] = 0.0
+    for ch in range(d):
+        c = cg[ch]
+        col = 0.0
+        for i in range(m):
+            gp = box[BOX_ROWS + ch, i]
+            box[BOX_GC, i] += gp * c
+            col += box[BOX_W, i] * gp if box[BOX_HIT, i] > 0.0 else 0.0
+        acc[GEO + ch] += col
     s_x = s_y = s_xx = s_xy = s_yy = s_o = 0.0
     for i in range(m):
-        dx = np.float64(i) + x0 - mx
-        on = lane[1, i] > 0.0
-        la = lane[6, i] * lane[2, i] if on else 0.0
+        dx, dy = box[BOX_DX, i], box[BOX_DY, i]
+        grad = (box[BOX_GC, i] * box[BOX_TRANS, i] - box[BOX_BEHIND, i]) * box[BOX_INV, i]  # dL/dalpha
+        on = box[BOX_ON, i] > 0.0
+        la = grad * box[BOX_ALPHA, i] if on else 0.0
         lx, ly = la * dx, la * dy
         s_x += lx
         s_y += ly
         s_xx += lx * dx
         s_xy += lx * dy
         s_yy += ly * dy
-        s_o += lane[6, i] * lane[3, i] if on else 0.0
+        s_o += grad * box[BOX_GAUSS, i] if on else 0.0
     acc[0] += s_x
     acc[1] += s_y
     acc[2] += s_xx
     acc[3] += s_xy
     acc[4] += s_yy
     acc[5] += s_o
-    for ch in range(d):
-        col = 0.0
-        for i in range(m):
-            col += lane[4, i] * gpix[ch, a + i] if lane[0, i] > 0.0 else 0.0
-        acc[GEO + ch] += col
-
-
-@njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
-def _backward_box(trans, last, behind, gpix, cg, a0, rows, stride, n, m, x0, pos, mx, dy0, ca, cb, cc, o, cut,
-                  alpha_min, alpha_max, lane, acc):
-    """One pair's gradient replay over its box (as `_gram_box`): `_backward_row_lanes` then `_backward_row_sums`
-    per row, adding to acc."""
-    d = cg.shape[0]
     for r in range(rows):
-        a = a0 + r * stride
-        dy = dy0 + np.float64(r)
-        _backward_row_lanes(trans, last, behind, gpix, cg, a, n, m, x0, pos, mx, dy, ca, cb, cc, o, cut, alpha_min,
-                            alpha_max, lane)
-        _backward_row_sums(lane, gpix, a, m, x0, mx, dy, d, acc)
+        a, k = a0 + r * stride, r * n
+        for i in range(n):
+            take = box[BOX_HIT, k + i] > 0.0
+            behind[a + i] += box[BOX_W, k + i] * box[BOX_GC, k + i] if take else 0.0
+        for i in range(n):
+            take = box[BOX_HIT, k + i] > 0.0
+            trans[a + i] = box[BOX_TRANS, k + i] * box[BOX_INV, k + i] if take else trans[a + i]
 
 
 @njit(parallel=True, cache=True)
@@ -411,7 +442,7 @@ def backward(offsets, ids, rects, geom, colors, background, width, height, tile_
         behind = np.zeros(num_px)  # g . (colour behind the current pair) - dL/dalpha_out T_final
         gpix = np.zeros((d, num_px))
         last = np.zeros(num_px, np.int32)
-        lane = np.empty((BACK_ROWS, stride))
+        box = np.empty((BOX_ROWS + d, tile_size * tile_size + BOX_LANES))
         acc = np.empty(GEO + d)
         for t in range(sl, num_tiles, num_slices):
             px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
@@ -428,14 +459,14 @@ def backward(offsets, ids, rects, geom, colors, background, width, height, tile_
             for j in range(longest - 1, -1, -1):
                 g = ids[start + j]
                 x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
-                if x_hi < x_lo:
+                if x_hi < x_lo or y_hi < y_lo:  # the reach box misses the tile
                     continue
                 mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-                a0, rows, step, cnt, m = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
+                a0, rows, step, cnt, _ = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
                 acc[:] = 0.0
-                _backward_box(trans, last, behind, gpix, colors[g], a0, rows, step, cnt, m, x_lo + 0.5, np.int32(j),
-                              mx, y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6],
-                              alpha_min, alpha_max, lane, acc)
+                _backward_box(trans, last, behind, gpix, colors[g], a0, rows, step, cnt, x_lo + 0.5, np.int32(j), mx,
+                              y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
+                              alpha_max, box, acc)
                 ca, cb, cc = geom[g, 2], geom[g, 3], geom[g, 4]
                 row = buf[sl, g]
                 row[0] += ca * acc[0] + cb * acc[1]

@@ -7,6 +7,7 @@ import torch
 
 from gaussian_renderer import RasterSettings, attribute_gram, rasterize
 from gaussian_renderer import compiled
+from gaussian_renderer.compiled import ops
 from gaussian_renderer.reference import rasterize_reference
 from tests.conftest import run_cli
 from tests.test_rasterize import BG, _grads, _run, random_2d_scene
@@ -111,6 +112,20 @@ def test_compiled_matches_torch_twin(case, dtype):
     for name, a, b in zip(names, compiled_out, torch_out):
         assert a.dtype == b.dtype and a.shape == b.shape, name
         _assert_close_rel(a, b, TOL[dtype], f"{case} {dtype} {name}")
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_transmittance_only_forward_equals_the_full_forward(case):
+    # The replays' forward (no colours) must leave the same final transmittance and last contributor.
+    make, width, height, tile = CASES[case]
+    means2d, conics, opacities, colors, depths, radii = make(torch.float64)
+    settings = RasterSettings(tile_size=tile, backend="compiled")
+    bins = ops.bin_gaussians_compiled(means2d, conics, opacities, radii, depths, width, height, settings)
+    _, trans, last = ops.composite_compiled(bins, means2d, conics, opacities, colors, BG.double(), width, height,
+                                            settings)
+    trans_only, last_only = ops.transmittance_compiled(bins, means2d, conics, opacities, width, height, settings)
+    assert torch.equal(torch.from_numpy(trans_only), trans) and torch.equal(torch.from_numpy(last_only), last)
+    assert (last > 0).any() and (trans < 1).any()
 
 
 def test_cases_exercise_every_rule():

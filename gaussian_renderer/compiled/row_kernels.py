@@ -210,6 +210,18 @@ def _gather_valid(last, a0, rows, stride, n, pos, box):
 
 
 @njit(inline="always", cache=True)
+def _gather_replay(trans, last, extra, extra_row, channels, a0, rows, stride, n, x0, pos, mx, dy0, box):
+    """A replay's box: `_gather_box`, BOX_VALID, one more tile array extra [*] into box row extra_row and channels
+    [D, *] into rows BOX_ROWS + channel. Returns the lane count."""
+    m = _gather_box(trans, a0, rows, stride, n, x0, mx, dy0, box)
+    _gather_valid(last, a0, rows, stride, n, pos, box)
+    _gather_row(extra, a0, rows, stride, n, m, box, extra_row)
+    for ch in range(channels.shape[0]):
+        _gather_row(channels[ch], a0, rows, stride, n, m, box, BOX_ROWS + ch)
+    return m
+
+
+@njit(inline="always", cache=True)
 def _scatter_box(trans, behind, a0, rows, stride, n, box):
     """The Gram's write-back of a box: transmittance (front where hit) and colour behind to the padded tile rows."""
     d = behind.shape[0]
@@ -231,11 +243,7 @@ def _gram_box(trans, last, behind, wpix, cg, a0, rows, stride, n, x0, pos, mx, d
     transmittance; per channel u, |u|^2, the colour behind and the cross sums; the moments), scattered back. Adds
     the pair's sums to acc in `gram`'s order."""
     d = cg.shape[0]
-    m = _gather_box(trans, a0, rows, stride, n, x0, mx, dy0, box)
-    _gather_valid(last, a0, rows, stride, n, pos, box)
-    _gather_row(wpix, a0, rows, stride, n, m, box, BOX_WPIX)
-    for ch in range(d):
-        _gather_row(behind[ch], a0, rows, stride, n, m, box, BOX_ROWS + ch)
+    m = _gather_replay(trans, last, wpix, BOX_WPIX, behind, a0, rows, stride, n, x0, pos, mx, dy0, box)
     ww = 0.0
     for i in range(m):
         _, alpha, hit, unclamped = _alpha_lane(box[BOX_DX, i], box[BOX_DY, i], ca, cb, cc, o, cut, alpha_min,
@@ -374,11 +382,7 @@ def _backward_box(trans, last, behind, gpix, cg, a0, rows, stride, n, x0, pos, m
     moments x, y, xx, xy, yy, the opacity sum and the colour gradient sum_p w g_p; steps trans / behind [*] to the
     front of the pair where it contributes."""
     d = cg.shape[0]
-    m = _gather_box(trans, a0, rows, stride, n, x0, mx, dy0, box)
-    _gather_valid(last, a0, rows, stride, n, pos, box)
-    _gather_row(behind, a0, rows, stride, n, m, box, BOX_BEHIND)
-    for ch in range(d):
-        _gather_row(gpix[ch], a0, rows, stride, n, m, box, BOX_ROWS + ch)
+    m = _gather_replay(trans, last, behind, BOX_BEHIND, gpix, a0, rows, stride, n, x0, pos, mx, dy0, box)
     for i in range(m):
         gauss, alpha, hit, unclamped = _alpha_lane(box[BOX_DX, i], box[BOX_DY, i], ca, cb, cc, o, cut, alpha_min,
                                                    alpha_max)

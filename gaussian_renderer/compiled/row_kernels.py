@@ -5,7 +5,7 @@ handed to a separate, non-inlined function (`_forward_box`, `_gram_box`, `_backw
 into SIMD code (4 float64 lanes): every test is a select instead of a branch, so padding lanes and the lanes a test
 rejects are computed, then discarded. The forward loops over each box row (rounded up to a multiple of `LANES`);
 the replays (Gram, backward), whose per-lane work is longer, first copy the box into one contiguous run of lanes
-(`_gather_box`: a box row is ~12 pixels, too short for a vector loop to pay for its set-up and hide its latency),
+(`_gather_box`: a box row is ~12 pixels, too short for a vector loop to pay for its set-up and scalar remainder),
 make their passes over all of it, and write the updated transmittance and colour behind back. For that:
 
 - tile state lives in padded rows (tile_size + LANES long), so a rounded-up row never reaches the next one;
@@ -171,8 +171,9 @@ BOX_ROWS = 17
 def _gather_box(trans, a0, rows, stride, n, x0, mx, dy0, box):
     """Copy a pair's box (`rows` rows of n pixels from padded index a0, the first pixel x0 - mx, dy0 from the mean)
     into contiguous lanes of box: BOX_DX, BOX_DY, BOX_TRANS; the lanes after it up to a multiple of LANES get
-    zeros there and in BOX_VALID. A box row is ~12 pixels: too short for a vector loop to hide its latency, so the
-    kernels work on the box as one run of lanes. Returns the lane count (padding included)."""
+    zeros there and in BOX_VALID. A box row is ~12 pixels: too short for a vector loop to pay for its set-up (alias
+    checks) and scalar remainder, so the replays work on the box as one run of lanes. Returns the lane count
+    (padding included)."""
     size = rows * n
     m = (size + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
     for r in range(rows):
@@ -238,10 +239,9 @@ def _scatter_box(trans, behind, a0, rows, stride, n, box):
 def _gram_box(trans, last, behind, wpix, cg, a0, rows, stride, n, x0, pos, mx, dy0, ca, cb, cc, o, cut, alpha_min,
               alpha_max, box, acc):
     """One pair's replay over its box (`rows` rows of n pixels from padded index a0, the first pixel x0 - mx, dy0
-    from the mean), back to front (see `gram`): gathered into one run of lanes (a box row is ~12 pixels, too short
-    for the vector loops to hide their latency), replayed in three passes over all of them (alpha and the front
-    transmittance; per channel u, |u|^2, the colour behind and the cross sums; the moments), scattered back. Adds
-    the pair's sums to acc in `gram`'s order."""
+    from the mean), back to front (see `gram`): gathered into one run of lanes (`_gather_box` says why), replayed in
+    three passes over all of them (alpha and the front transmittance; per channel u, |u|^2, the colour behind and
+    the cross sums; the moments), scattered back. Adds the pair's sums to acc in `gram`'s order."""
     d = cg.shape[0]
     m = _gather_replay(trans, last, wpix, BOX_WPIX, behind, a0, rows, stride, n, x0, pos, mx, dy0, box)
     ww = 0.0

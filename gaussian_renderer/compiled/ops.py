@@ -102,15 +102,22 @@ def _kernel_args(bins: CompiledBins, means2d, conics, opacities, colors, backgro
             bins.block, bins.blocks_x, float(settings.alpha_min), float(settings.alpha_max))
 
 
-def composite_compiled(bins: CompiledBins, means2d, conics, opacities, colors, background, width: int, height: int,
-                       settings: RasterSettings) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Forward pass: image [D, H, W] (input dtype), final transmittance [H, W] (float64), last [H, W] (int32)."""
+def _forward(bins: CompiledBins, means2d, conics, opacities, colors, background, width: int, height: int,
+             settings: RasterSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`row_kernels.forward`: image [D, H, W], final transmittance [H, W] (float64), last [H, W] (int32)."""
     image = np.zeros((colors.shape[1], height, width))
     trans = np.ones((height, width))
     last = np.zeros((height, width), np.int32)
     _use_torch_threads()
     row_kernels.forward(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height,
                                       settings), float(settings.transmittance_min), image, trans, last)
+    return image, trans, last
+
+
+def composite_compiled(bins: CompiledBins, means2d, conics, opacities, colors, background, width: int, height: int,
+                       settings: RasterSettings) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Forward pass: image [D, H, W] (input dtype), final transmittance [H, W] (float64), last [H, W] (int32)."""
+    image, trans, last = _forward(bins, means2d, conics, opacities, colors, background, width, height, settings)
     return torch.from_numpy(image).to(colors.dtype), torch.from_numpy(trans), torch.from_numpy(last)
 
 
@@ -118,13 +125,9 @@ def transmittance_compiled(bins: CompiledBins, means2d, conics, opacities, width
                            settings: RasterSettings) -> tuple[np.ndarray, np.ndarray]:
     """The forward pass without colours (what a replay needs): final transmittance [H, W] (float64), last [H, W]
     (int32), equal to `composite_compiled`'s, ~1.3x faster (no colour accumulation)."""
-    trans = np.ones((height, width))
-    last = np.zeros((height, width), np.int32)
     no_colors = means2d.new_zeros(means2d.shape[0], 0)  # [N, 0]
-    _use_torch_threads()
-    row_kernels.forward(*_kernel_args(bins, means2d, conics, opacities, no_colors, means2d.new_zeros(0), width,
-                                      height, settings), float(settings.transmittance_min),
-                        np.zeros((0, height, width)), trans, last)
+    _, trans, last = _forward(bins, means2d, conics, opacities, no_colors, means2d.new_zeros(0), width, height,
+                              settings)
     return trans, last
 
 

@@ -113,10 +113,23 @@ def load_run(model: Path) -> Run:
         run.problem = "no readable selection.json or cfg_args"
     else:
         status = _read_json(model / RUN_STATUS) if (model / RUN_STATUS).is_file() else None
-        state = status.get("status", "?") if isinstance(status, dict) else "not started"
-        run.problem = "no results.json (training " + ("complete: render + metrics missing" if state == "complete"
-                                                     else f"{state}, {len(run.stages)} step(s) done") + ")"
+        run.problem = f"no results.json ({_training_state(status, len(run.stages))})"
     return run
+
+
+def _training_state(status: object, steps_done: int) -> str:
+    """What run_status.json says of an unfinished run. "running" is only the last record: the process may have
+    stopped since, so the time of that record is given instead of a claim that it is still running."""
+    if not isinstance(status, dict):
+        return f"no run_status.json, {steps_done} step(s) done"
+    state = status.get("status", "?")
+    if state == "complete":
+        return "training complete: render + metrics missing"
+    if state != "running":
+        return f"training {state}, {steps_done} step(s) done"
+    progress = f", iteration {status['iteration']}/{status.get('total_iterations', '?')}" if "iteration" in status else ""
+    when = f" at {status['updated']}" if "updated" in status else ""
+    return f"training unfinished: {steps_done} step(s) done{progress}, last progress recorded{when}"
 
 
 def find_runs(roots: list[str]) -> list[Run]:

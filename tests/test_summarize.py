@@ -249,3 +249,16 @@ def test_job_minutes_sum_every_invocation_that_worked_on_a_run(tmp_path):
     record_job_time(model, 50.0, "done")
     assert [r["state"] for r in json.loads((model / JOB_TIMES).read_text())] == ["failed", "done"]
     assert summarize.find_runs([str(tmp_path / "out")])[0].job_seconds == 150.0
+
+
+def test_an_unfinished_run_is_reported_with_its_last_progress_not_as_running(tmp_path):
+    """run_status.json says "running" until the process ends; a killed run keeps saying it. The summary gives the time
+    of the last record (the progress so far), never a claim that the run is still going."""
+    model = make_run(tmp_path, "setup1", "lego", "pop_gs", 0, "pop_gs", 3, 0.1, [(10, 10)], None)
+    (model / "run_status.json").write_text(json.dumps(
+        {"status": "running", "iteration": 1805, "total_iterations": 2000, "updated": "2026-12-03 14:20:22"}))
+    problem = summarize.load_run(model).problem
+    assert problem == ("no results.json (training unfinished: 1 step(s) done, iteration 1805/2000, "
+                       "last progress recorded at 2026-12-03 14:20:22)")
+    (model / "run_status.json").unlink()
+    assert summarize.load_run(model).problem == "no results.json (no run_status.json, 1 step(s) done)"

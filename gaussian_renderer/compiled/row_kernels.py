@@ -1,14 +1,16 @@
 """Row-vectorised numba kernels: forward compositing, its backward, and the Fisher moment sums (`gram`).
 
 Same tiles, lists, pixel boxes and compositing rules as `kernels` (its module docstring), but each pair's box is
-handed to a separate, non-inlined function (`_forward_box`, `_gram_box`, `_backward_box`) whose loops LLVM turns
+handed to a separate, non-inlined function (`_forward_box`, `_gram_band`, `_backward_band`) whose loops LLVM turns
 into SIMD code (4 float64 lanes): every test is a select instead of a branch, so padding lanes and the lanes a test
-rejects are computed, then discarded. The forward loops over each box row (rounded up to a multiple of `LANES`);
-the replays (Gram, backward), whose per-lane work is longer, first copy the box into one contiguous run of lanes
-(`_gather_box`: a box row is ~12 pixels, too short for a vector loop to pay for its set-up and scalar remainder),
-make their passes over all of it, and write the updated transmittance and colour behind back. For that:
+rejects are computed, then discarded. The forward loops over each box row, rounded up to a multiple of `LANES`, in
+padded tile rows (tile_size + LANES long, so a rounded-up row never reaches the next one). The replays (Gram,
+backward), whose per-lane work is longer, keep their tile state row-major with the tile's width as stride and make
+each pass over a pair's *band*: the full-width tile rows its box spans, one contiguous run of lanes, the columns
+outside the box rejected like any other failed test. A box row is ~12 pixels: a loop per row paid its set-up and
+scalar remainder per row, and copying the box into contiguous lanes first (stop 37) paid a copy per row; the band
+computes ~30 % more lanes and does neither. For all of them:
 
-- tile state lives in padded rows (tile_size + LANES long), so a rounded-up row never reaches the next one;
 - exp comes from `exp_neg`, a polynomial that vectorises (numba's exp is a libm call that does not);
 - the numpy error model (a division by zero gives inf rather than raising, which would be a branch);
 - `not (x > y)` rather than `x <= y` wherever the scalar kernels skipped on a comparison, so NaN inputs still take
@@ -26,8 +28,8 @@ from numba import njit, prange
 
 from gaussian_renderer.compiled.kernels import GEO, NUM_MOMENTS, _pair_box, _sum_slices
 
-# Box rows (forward) and gathered boxes (replays) are rounded up to a multiple of LANES: the vector loops step by
-# 2 x 4 float64 lanes, so a row of 4 or 12 would leave 4 lanes to the scalar remainder (forward 1.12x against 4)
+# The forward's box rows are rounded up to a multiple of LANES: the vector loops step by 2 x 4 float64 lanes, so a
+# row of 4 or 12 would leave 4 lanes to the scalar remainder (forward 1.12x against 4)
 LANES = 8
 EXP_SQUARINGS = 6  # exp(x) = p(x / 2^6)^(2^6): the Taylor polynomial p stays within |r| <= 0.35 for x >= -22.1
 EXP_MIN = -22.0  # below this `exp_neg` is clamped (RasterSettings keeps alpha_min >= 1e-9 > e^-22 / 1)
@@ -70,21 +72,6 @@ def _box_layout(x_lo, x_hi, y_lo, y_hi, stride):
     n = np.uint64(x_hi - x_lo + 1)
     m = (n + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
     return np.uint64(y_lo * stride + x_lo), np.uint64(y_hi - y_lo + 1), np.uint64(stride), n, m
-
-
-@njit(inline="always", cache=True)
-def _load_replay_tile(px0, py0, width, height, tile_size, stride, trans_final, last_in, trans, last):
-    """Fill trans / last (padded rows) of the tile at (px0, py0) from the forward pass, last = 0 outside the image;
-    returns the tile's longest replay (max last)."""
-    last[:] = 0
-    longest = 0
-    for y in range(min(tile_size, height - py0)):
-        for x in range(min(tile_size, width - px0)):
-            p = y * stride + x
-            trans[p] = trans_final[py0 + y, px0 + x]
-            last[p] = last_in[py0 + y, px0 + x]
-            longest = max(longest, last[p])
-    return longest
 
 
 @njit(fastmath={"contract"}, error_model="numpy", inline="never", cache=True)
@@ -160,124 +147,99 @@ def forward(offsets, ids, rects, geom, colors, background, width, height, tile_s
                 last_out[py0 + y, px0 + x] = last[p]
 
 
-# rows of the box scratch (a lane per pixel of a pair's box, row-major, `_gather_box`): the pixel's offset from the
-# mean, its transmittance, valid (1 / 0), pixel weight; what the kernels compute per lane; then D rows of colour
-(BOX_DX, BOX_DY, BOX_TRANS, BOX_VALID, BOX_WPIX, BOX_HIT, BOX_ON, BOX_Q, BOX_SA, BOX_INV, BOX_FRONT, BOX_W, BOX_U2,
- BOX_GAUSS, BOX_GC, BOX_BEHIND, BOX_ALPHA) = range(17)
-BOX_ROWS = 17
+# The replays' tile state (`_band_lanes`): a lane per pixel of the tile, row-major with the tile's width as stride, so the rows y_lo to
+# y_hi of a pair's box are one contiguous run of lanes, a *band*. Rows: the pixel's centre in the tile, its
+# transmittance, last (as a float: 0 outside the image), pixel weight (Gram); per-lane results of a pair; the colour
+# behind in the backward's form (g . B, one row); then D rows of colour behind (Gram) or loss gradient (backward).
+(LANE_X, LANE_Y, LANE_TRANS, LANE_LAST, LANE_WPIX, LANE_HIT, LANE_ON, LANE_Q, LANE_SA, LANE_INV, LANE_FRONT, LANE_W,
+ LANE_U2, LANE_GAUSS, LANE_GC, LANE_ALPHA, LANE_BEHIND) = range(17)
+LANE_ROWS = 17
 
 
 @njit(inline="always", cache=True)
-def _gather_box(trans, a0, rows, stride, n, x0, mx, dy0, box):
-    """Copy a pair's box (`rows` rows of n pixels from padded index a0, the first pixel x0 - mx, dy0 from the mean)
-    into contiguous lanes of box: BOX_DX, BOX_DY, BOX_TRANS; the lanes after it up to a multiple of LANES get
-    zeros there and in BOX_VALID. A box row is ~12 pixels: too short for a vector loop to pay for its set-up (alias
-    checks) and scalar remainder, so the replays work on the box as one run of lanes. Returns the lane count
-    (padding included)."""
-    size = rows * n
-    m = (size + np.uint64(LANES - 1)) // np.uint64(LANES) * np.uint64(LANES)
-    for r in range(rows):
-        a, k = a0 + r * stride, r * n
-        dy = dy0 + np.float64(r)
-        for i in range(n):  # one loop per row of box: each stays a plain vectorisable copy
-            box[BOX_DX, k + i] = np.float64(i) + x0 - mx
-        for i in range(n):
-            box[BOX_DY, k + i] = dy
-        for i in range(n):
-            box[BOX_TRANS, k + i] = trans[a + i]
-    for i in range(size, m):
-        box[BOX_DX, i] = box[BOX_DY, i] = box[BOX_TRANS, i] = box[BOX_VALID, i] = 0.0
-    return m
+def _band_lanes(tile_size, channels):
+    """A slice's replay state [LANE_ROWS + channels, tile_size^2], LANE_X / LANE_Y filled (pixel centres)."""
+    lanes = np.zeros((LANE_ROWS + channels, tile_size * tile_size))
+    for i in range(tile_size * tile_size):
+        lanes[LANE_X, i] = (i % tile_size) + 0.5
+        lanes[LANE_Y, i] = (i // tile_size) + 0.5
+    return lanes
 
 
 @njit(inline="always", cache=True)
-def _gather_row(src, a0, rows, stride, n, m, box, dst):
-    """Copy a box of the padded tile array src [*] into box row dst, as `_gather_box` lays it out (zero padding)."""
-    for r in range(rows):
-        a, k = a0 + r * stride, r * n
-        for i in range(n):
-            box[dst, k + i] = src[a + i]
-    for i in range(rows * n, m):
-        box[dst, i] = 0.0
+def _load_band_tile(px0, py0, width, height, tile_size, trans_final, last_in, lanes):
+    """LANE_TRANS / LANE_LAST of the tile at (px0, py0) from the forward pass (last = 0 outside the image); returns
+    the tile's longest replay (max last)."""
+    lanes[LANE_LAST, :] = 0.0
+    longest = 0
+    for y in range(min(tile_size, height - py0)):
+        for x in range(min(tile_size, width - px0)):
+            p = y * tile_size + x
+            lanes[LANE_TRANS, p] = trans_final[py0 + y, px0 + x]
+            lanes[LANE_LAST, p] = last_in[py0 + y, px0 + x]
+            longest = max(longest, last_in[py0 + y, px0 + x])
+    return longest
 
 
 @njit(inline="always", cache=True)
-def _gather_valid(last, a0, rows, stride, n, pos, box):
-    """BOX_VALID of a replay: 1 where the pair (at list position pos) is before the pixel's last contributor."""
-    for r in range(rows):
-        a, k = a0 + r * stride, r * n
-        for i in range(n):
-            box[BOX_VALID, k + i] = 1.0 if pos < last[a + i] else 0.0
+def _band(y_lo, y_hi, tile_size):
+    """The lanes [lo, hi) of box rows y_lo..y_hi, unsigned: a signed index gets numba's negative-index wraparound,
+    which stops the vectoriser."""
+    return np.uint64(y_lo * tile_size), np.uint64((y_hi + 1) * tile_size)
 
 
 @njit(inline="always", cache=True)
-def _gather_replay(trans, last, extra, extra_row, channels, a0, rows, stride, n, x0, pos, mx, dy0, box):
-    """A replay's box: `_gather_box`, BOX_VALID, one more tile array extra [*] into box row extra_row and channels
-    [D, *] into rows BOX_ROWS + channel. Returns the lane count."""
-    m = _gather_box(trans, a0, rows, stride, n, x0, mx, dy0, box)
-    _gather_valid(last, a0, rows, stride, n, pos, box)
-    _gather_row(extra, a0, rows, stride, n, m, box, extra_row)
-    for ch in range(channels.shape[0]):
-        _gather_row(channels[ch], a0, rows, stride, n, m, box, BOX_ROWS + ch)
-    return m
-
-
-@njit(inline="always", cache=True)
-def _scatter_box(trans, behind, a0, rows, stride, n, box):
-    """The Gram's write-back of a box: transmittance (front where hit) and colour behind to the padded tile rows."""
-    d = behind.shape[0]
-    for r in range(rows):
-        a, k = a0 + r * stride, r * n
-        for i in range(n):
-            trans[a + i] = box[BOX_FRONT, k + i] if box[BOX_HIT, k + i] > 0.0 else trans[a + i]
-        for ch in range(d):
-            for i in range(n):
-                behind[ch, a + i] = box[BOX_ROWS + ch, k + i]
+def _replay_lane(lanes, i, xl, xr, pos, mx, my, ca, cb, cc, o, cut, alpha_min, alpha_max):
+    """(dx, dy, gauss, alpha, hit, unclamped) of a pair at lane i of its band: `_alpha_lane`'s tests, and the pixel
+    inside the box's columns (xl < x + 0.5 < xr) and before its last contributor (pos < last)."""
+    x = lanes[LANE_X, i]
+    dx, dy = x - mx, lanes[LANE_Y, i] - my
+    gauss, alpha, hit, unclamped = _alpha_lane(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
+    hit = hit & (x > xl) & (x < xr) & (pos < lanes[LANE_LAST, i])
+    return dx, dy, gauss, alpha, hit, unclamped
 
 
 @njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
-def _gram_box(trans, last, behind, wpix, cg, a0, rows, stride, n, x0, pos, mx, dy0, ca, cb, cc, o, cut, alpha_min,
-              alpha_max, box, acc):
-    """One pair's replay over its box (`rows` rows of n pixels from padded index a0, the first pixel x0 - mx, dy0
-    from the mean), back to front (see `gram`): gathered into one run of lanes (`_gather_box` says why), replayed in
-    three passes over all of them (alpha and the front transmittance; per channel u, |u|^2, the colour behind and
-    the cross sums; the moments), scattered back. Adds the pair's sums to acc in `gram`'s order."""
+def _gram_band(lanes, lo, hi, xl, xr, cg, pos, mx, my, ca, cb, cc, o, cut, alpha_min, alpha_max, acc):
+    """One pair's replay over its band, lanes [lo, hi) (`_band`), back to front (see `gram`), in three passes:
+    alpha and the front transmittance (written to LANE_TRANS where the pair contributes); per channel u, |u|^2, the
+    cross sums and the colour behind; the moments. Lanes outside the box's columns xl < x < xr are rejected like
+    every other failed test. Adds the pair's sums to acc in `gram`'s order."""
     d = cg.shape[0]
-    m = _gather_replay(trans, last, wpix, BOX_WPIX, behind, a0, rows, stride, n, x0, pos, mx, dy0, box)
     ww = 0.0
-    for i in range(m):
-        _, alpha, hit, unclamped = _alpha_lane(box[BOX_DX, i], box[BOX_DY, i], ca, cb, cc, o, cut, alpha_min,
-                                               alpha_max)
-        hit = hit & (box[BOX_VALID, i] > 0.0)
+    for i in range(lo, hi):
+        _, _, _, alpha, hit, unclamped = _replay_lane(lanes, i, xl, xr, pos, mx, my, ca, cb, cc, o, cut, alpha_min,
+                                                      alpha_max)
         inv = 1.0 / (1.0 - alpha)
-        t_front = box[BOX_TRANS, i] * inv
+        t_front = lanes[LANE_TRANS, i] * inv
         w = alpha * t_front
-        wp = box[BOX_WPIX, i]
-        box[BOX_HIT, i] = 1.0 if hit else 0.0
-        box[BOX_ON, i] = 1.0 if hit & unclamped else 0.0
-        box[BOX_Q, i] = wp * w * alpha
-        box[BOX_SA, i] = wp * alpha * alpha
-        box[BOX_INV, i] = inv
-        box[BOX_FRONT, i] = t_front
-        box[BOX_W, i] = w
-        box[BOX_U2, i] = 0.0
+        wp = lanes[LANE_WPIX, i]
+        lanes[LANE_HIT, i] = 1.0 if hit else 0.0
+        lanes[LANE_ON, i] = 1.0 if hit & unclamped else 0.0
+        lanes[LANE_Q, i] = wp * w * alpha
+        lanes[LANE_SA, i] = wp * alpha * alpha
+        lanes[LANE_INV, i] = inv
+        lanes[LANE_FRONT, i] = t_front
+        lanes[LANE_W, i] = w
+        lanes[LANE_U2, i] = 0.0
+        lanes[LANE_TRANS, i] = t_front if hit else lanes[LANE_TRANS, i]
         ww += wp * w * w if hit else 0.0
     acc[NUM_MOMENTS + GEO * d] += ww
     for ch in range(d):  # X rows: x, y, xx, xy, yy, 1
-        c = cg[ch]
+        c, b = cg[ch], LANE_ROWS + ch
         c_x = c_y = c_xx = c_xy = c_yy = c_1 = 0.0
-        for i in range(m):
-            dx, dy = box[BOX_DX, i], box[BOX_DY, i]
-            u = c * box[BOX_FRONT, i] - box[BOX_ROWS + ch, i] * box[BOX_INV, i]
-            box[BOX_U2, i] += u * u
-            qu = box[BOX_Q, i] * u if box[BOX_ON, i] > 0.0 else 0.0
+        for i in range(lo, hi):
+            dx, dy = lanes[LANE_X, i] - mx, lanes[LANE_Y, i] - my
+            u = c * lanes[LANE_FRONT, i] - lanes[b, i] * lanes[LANE_INV, i]
+            lanes[LANE_U2, i] += u * u
+            qu = lanes[LANE_Q, i] * u if lanes[LANE_ON, i] > 0.0 else 0.0
             c_x += qu * dx
             c_y += qu * dy
             c_xx += qu * dx * dx
             c_xy += qu * dx * dy
             c_yy += qu * dy * dy
             c_1 += qu
-            box[BOX_ROWS + ch, i] += box[BOX_W, i] * c if box[BOX_HIT, i] > 0.0 else 0.0
+            lanes[b, i] += lanes[LANE_W, i] * c if lanes[LANE_HIT, i] > 0.0 else 0.0
         acc[NUM_MOMENTS + ch] += c_x
         acc[NUM_MOMENTS + d + ch] += c_y
         acc[NUM_MOMENTS + 2 * d + ch] += c_xx
@@ -285,9 +247,9 @@ def _gram_box(trans, last, behind, wpix, cg, a0, rows, stride, n, x0, pos, mx, d
         acc[NUM_MOMENTS + 4 * d + ch] += c_yy
         acc[NUM_MOMENTS + 5 * d + ch] += c_1
     m0 = m1 = m2 = m3 = m4 = m5 = m6 = m7 = m8 = m9 = m10 = m11 = m12 = m13 = m14 = 0.0
-    for i in range(m):
-        dx, dy = box[BOX_DX, i], box[BOX_DY, i]
-        s = box[BOX_SA, i] * box[BOX_U2, i] if box[BOX_ON, i] > 0.0 else 0.0
+    for i in range(lo, hi):
+        dx, dy = lanes[LANE_X, i] - mx, lanes[LANE_Y, i] - my
+        s = lanes[LANE_SA, i] * lanes[LANE_U2, i] if lanes[LANE_ON, i] > 0.0 else 0.0
         xx, xy, yy = dx * dx, dx * dy, dy * dy
         m0 += s
         m1 += s * dx
@@ -319,7 +281,6 @@ def _gram_box(trans, last, behind, wpix, cg, a0, rows, stride, n, x0, pos, mx, d
     acc[12] += m12
     acc[13] += m13
     acc[14] += m14
-    _scatter_box(trans, behind, a0, rows, stride, n, box)
 
 
 @njit(parallel=True, cache=True)
@@ -337,37 +298,30 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
     n, d = colors.shape
     row_len = NUM_MOMENTS + GEO * d + 1
     num_tiles = offsets.shape[0] - 1
-    stride = tile_size + LANES
-    num_px = tile_size * stride
     buf = np.zeros((num_slices, n, row_len))
     for sl in prange(num_slices):  # interleaved tiles, one buffer per slice
-        trans = np.ones(num_px)
-        behind = np.zeros((d, num_px))
-        wpix = np.zeros(num_px)
-        last = np.zeros(num_px, np.int32)
-        box = np.empty((BOX_ROWS + d, tile_size * tile_size + LANES))
+        lanes = _band_lanes(tile_size, d)
         acc = np.empty(row_len)
         for t in range(sl, num_tiles, num_slices):
             px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
-            longest = _load_replay_tile(px0, py0, width, height, tile_size, stride, trans_final, last_in, trans, last)
+            longest = _load_band_tile(px0, py0, width, height, tile_size, trans_final, last_in, lanes)
             for y in range(min(tile_size, height - py0)):
                 for x in range(min(tile_size, width - px0)):
-                    p = y * stride + x
-                    wpix[p] = pixel_weights[py0 + y, px0 + x]
+                    p = y * tile_size + x
+                    lanes[LANE_WPIX, p] = pixel_weights[py0 + y, px0 + x]
                     for ch in range(d):
-                        behind[ch, p] = trans[p] * background[ch]
+                        lanes[LANE_ROWS + ch, p] = lanes[LANE_TRANS, p] * background[ch]
             start = offsets[t]
             for j in range(longest - 1, -1, -1):
                 g = ids[start + j]
                 x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
                 if x_hi < x_lo or y_hi < y_lo:  # the reach box misses the tile
                     continue
-                mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-                a0, rows, step, cnt, _ = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
+                lo, hi = _band(y_lo, y_hi, tile_size)
                 acc[:] = 0.0
-                _gram_box(trans, last, behind, wpix, colors[g], a0, rows, step, cnt, x_lo + 0.5, np.int32(j), mx,
-                          y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
-                          alpha_max, box, acc)
+                _gram_band(lanes, lo, hi, float(x_lo), float(x_hi + 1), colors[g], float(j), geom[g, 0] - px0,
+                           geom[g, 1] - py0, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
+                           alpha_max, acc)
                 row = buf[sl, g]
                 for k in range(row_len):
                     row[k] += acc[k]
@@ -375,103 +329,89 @@ def gram(offsets, ids, rects, geom, colors, background, width, height, tile_size
 
 
 @njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
-def _backward_box(trans, last, behind, gpix, cg, a0, rows, stride, n, x0, pos, mx, dy0, ca, cb, cc, o, cut, alpha_min,
-                  alpha_max, box, acc):
-    """One pair's gradient replay over its box, back to front (see `backward`), as one run of lanes like `_gram_box`
-    (the pixels' loss gradients in rows BOX_ROWS + channel): adds to acc [6 + D] the alpha-weighted dL/dalpha
-    moments x, y, xx, xy, yy, the opacity sum and the colour gradient sum_p w g_p; steps trans / behind [*] to the
-    front of the pair where it contributes."""
+def _backward_band(lanes, lo, hi, xl, xr, cg, pos, mx, my, ca, cb, cc, o, cut, alpha_min, alpha_max, acc):
+    """One pair's gradient replay over its band, lanes [lo, hi), back to front (see `backward`), like `_gram_band`
+    (the pixels' loss gradients in rows LANE_ROWS + channel): adds to acc [6 + D] the alpha-weighted dL/dalpha
+    moments x, y, xx, xy, yy, the opacity sum and the colour gradient sum_p w g_p; steps LANE_TRANS / LANE_BEHIND to
+    the front of the pair where it contributes."""
     d = cg.shape[0]
-    m = _gather_replay(trans, last, behind, BOX_BEHIND, gpix, a0, rows, stride, n, x0, pos, mx, dy0, box)
-    for i in range(m):
-        gauss, alpha, hit, unclamped = _alpha_lane(box[BOX_DX, i], box[BOX_DY, i], ca, cb, cc, o, cut, alpha_min,
-                                                   alpha_max)
-        hit = hit & (box[BOX_VALID, i] > 0.0)
+    for i in range(lo, hi):
+        _, _, gauss, alpha, hit, unclamped = _replay_lane(lanes, i, xl, xr, pos, mx, my, ca, cb, cc, o, cut,
+                                                          alpha_min, alpha_max)
         inv = 1.0 / (1.0 - alpha)
-        box[BOX_HIT, i] = 1.0 if hit else 0.0
-        box[BOX_ON, i] = 1.0 if hit & unclamped else 0.0
-        box[BOX_ALPHA, i] = alpha
-        box[BOX_GAUSS, i] = gauss
-        box[BOX_INV, i] = inv
-        box[BOX_W, i] = alpha * box[BOX_TRANS, i] * inv
-        box[BOX_GC, i] = 0.0
+        lanes[LANE_HIT, i] = 1.0 if hit else 0.0
+        lanes[LANE_ON, i] = 1.0 if hit & unclamped else 0.0
+        lanes[LANE_ALPHA, i] = alpha
+        lanes[LANE_GAUSS, i] = gauss
+        lanes[LANE_INV, i] = inv
+        lanes[LANE_W, i] = alpha * lanes[LANE_TRANS, i] * inv
+        lanes[LANE_GC, i] = 0.0
     for ch in range(d):
-        c = cg[ch]
+        c, b = cg[ch], LANE_ROWS + ch
         col = 0.0
-        for i in range(m):
-            gp = box[BOX_ROWS + ch, i]
-            box[BOX_GC, i] += gp * c
-            col += box[BOX_W, i] * gp if box[BOX_HIT, i] > 0.0 else 0.0
+        for i in range(lo, hi):
+            gp = lanes[b, i]
+            lanes[LANE_GC, i] += gp * c
+            col += lanes[LANE_W, i] * gp if lanes[LANE_HIT, i] > 0.0 else 0.0
         acc[GEO + ch] += col
     s_x = s_y = s_xx = s_xy = s_yy = s_o = 0.0
-    for i in range(m):
-        dx, dy = box[BOX_DX, i], box[BOX_DY, i]
-        grad = (box[BOX_GC, i] * box[BOX_TRANS, i] - box[BOX_BEHIND, i]) * box[BOX_INV, i]  # dL/dalpha
-        on = box[BOX_ON, i] > 0.0
-        la = grad * box[BOX_ALPHA, i] if on else 0.0
+    for i in range(lo, hi):
+        dx, dy = lanes[LANE_X, i] - mx, lanes[LANE_Y, i] - my
+        inv, gc, trans = lanes[LANE_INV, i], lanes[LANE_GC, i], lanes[LANE_TRANS, i]
+        grad = (gc * trans - lanes[LANE_BEHIND, i]) * inv  # dL/dalpha
+        on = lanes[LANE_ON, i] > 0.0
+        la = grad * lanes[LANE_ALPHA, i] if on else 0.0
         lx, ly = la * dx, la * dy
         s_x += lx
         s_y += ly
         s_xx += lx * dx
         s_xy += lx * dy
         s_yy += ly * dy
-        s_o += grad * box[BOX_GAUSS, i] if on else 0.0
+        s_o += grad * lanes[LANE_GAUSS, i] if on else 0.0
+        take = lanes[LANE_HIT, i] > 0.0
+        lanes[LANE_BEHIND, i] += lanes[LANE_W, i] * gc if take else 0.0
+        lanes[LANE_TRANS, i] = trans * inv if take else trans
     acc[0] += s_x
     acc[1] += s_y
     acc[2] += s_xx
     acc[3] += s_xy
     acc[4] += s_yy
     acc[5] += s_o
-    for r in range(rows):
-        a, k = a0 + r * stride, r * n
-        for i in range(n):
-            take = box[BOX_HIT, k + i] > 0.0
-            behind[a + i] += box[BOX_W, k + i] * box[BOX_GC, k + i] if take else 0.0
-        for i in range(n):
-            take = box[BOX_HIT, k + i] > 0.0
-            trans[a + i] = box[BOX_TRANS, k + i] * box[BOX_INV, k + i] if take else trans[a + i]
 
 
 @njit(parallel=True, cache=True)
 def backward(offsets, ids, rects, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
              trans_final, last_in, grad_image, grad_alpha, num_slices):
-    """Back-to-front replay, row-vectorised. Returns per-Gaussian gradients [N, 6 + D]: mean x, y, conic a, b, c,
+    """Back-to-front replay over bands. Returns per-Gaussian gradients [N, 6 + D]: mean x, y, conic a, b, c,
     opacity, colour[D] (for loss gradients grad_image [D, H, W] and grad_alpha [H, W])."""
     n, d = colors.shape
     num_tiles = offsets.shape[0] - 1
-    stride = tile_size + LANES
-    num_px = tile_size * stride
     buf = np.zeros((num_slices, n, GEO + d))
     for sl in prange(num_slices):  # interleaved tiles, one gradient buffer per slice
-        trans = np.ones(num_px)
-        behind = np.zeros(num_px)  # g . (colour behind the current pair) - dL/dalpha_out T_final
-        gpix = np.zeros((d, num_px))
-        last = np.zeros(num_px, np.int32)
-        box = np.empty((BOX_ROWS + d, tile_size * tile_size + LANES))
+        lanes = _band_lanes(tile_size, d)  # LANE_BEHIND: g . (colour behind the current pair) - dL/dalpha_out T_final
         acc = np.empty(GEO + d)
         for t in range(sl, num_tiles, num_slices):
             px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
-            longest = _load_replay_tile(px0, py0, width, height, tile_size, stride, trans_final, last_in, trans, last)
+            longest = _load_band_tile(px0, py0, width, height, tile_size, trans_final, last_in, lanes)
             for y in range(min(tile_size, height - py0)):
                 for x in range(min(tile_size, width - px0)):
-                    p = y * stride + x
+                    p = y * tile_size + x
                     gb = 0.0
                     for ch in range(d):
-                        gpix[ch, p] = grad_image[ch, py0 + y, px0 + x]
-                        gb += gpix[ch, p] * background[ch]
-                    behind[p] = trans[p] * (gb - grad_alpha[py0 + y, px0 + x])
+                        lanes[LANE_ROWS + ch, p] = grad_image[ch, py0 + y, px0 + x]
+                        gb += grad_image[ch, py0 + y, px0 + x] * background[ch]
+                    lanes[LANE_BEHIND, p] = lanes[LANE_TRANS, p] * (gb - grad_alpha[py0 + y, px0 + x])
             start = offsets[t]
             for j in range(longest - 1, -1, -1):
                 g = ids[start + j]
                 x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
                 if x_hi < x_lo or y_hi < y_lo:  # the reach box misses the tile
                     continue
-                mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-                a0, rows, step, cnt, _ = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
+                lo, hi = _band(y_lo, y_hi, tile_size)
                 acc[:] = 0.0
-                _backward_box(trans, last, behind, gpix, colors[g], a0, rows, step, cnt, x_lo + 0.5, np.int32(j), mx,
-                              y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min,
-                              alpha_max, box, acc)
+                _backward_band(lanes, lo, hi, float(x_lo), float(x_hi + 1), colors[g], float(j), geom[g, 0] - px0,
+                               geom[g, 1] - py0, geom[g, 2], geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6],
+                               alpha_min, alpha_max, acc)
                 ca, cb, cc = geom[g, 2], geom[g, 3], geom[g, 4]
                 row = buf[sl, g]
                 row[0] += ca * acc[0] + cb * acc[1]

@@ -127,7 +127,8 @@ def _training_state(status: object, steps_done: int) -> str:
         return "training complete: render + metrics missing"
     if state != "running":
         return f"training {state}, {steps_done} step(s) done"
-    progress = f", iteration {status['iteration']}/{status.get('total_iterations', '?')}" if "iteration" in status else ""
+    total = status.get("total_iterations", "?")
+    progress = f", iteration {status['iteration']}/{total}" if "iteration" in status else ""
     when = f" at {status['updated']}" if "updated" in status else ""
     return f"training unfinished: {steps_done} step(s) done{progress}, last progress recorded{when}"
 

@@ -147,10 +147,11 @@ def forward(offsets, ids, rects, geom, colors, background, width, height, tile_s
                 last_out[py0 + y, px0 + x] = last[p]
 
 
-# The replays' tile state (`_band_lanes`): a lane per pixel of the tile, row-major with the tile's width as stride, so the rows y_lo to
-# y_hi of a pair's box are one contiguous run of lanes, a *band*. Rows: the pixel's centre in the tile, its
-# transmittance, last (as a float: 0 outside the image), pixel weight (Gram); per-lane results of a pair; the colour
-# behind in the backward's form (g . B, one row); then D rows of colour behind (Gram) or loss gradient (backward).
+# The replays' tile state (`_band_lanes`): a lane per pixel of the tile, row-major with the tile's width as stride,
+# so the rows y_lo to y_hi of a pair's box are one contiguous run of lanes, a *band*. Rows: the pixel's centre in the
+# tile, its transmittance, last (as a float: 0 outside the image), pixel weight (Gram); per-lane results of a pair;
+# the colour behind in the backward's form (g . B, one row); then D rows of colour behind (Gram) or loss gradient
+# (backward).
 (LANE_X, LANE_Y, LANE_TRANS, LANE_LAST, LANE_WPIX, LANE_HIT, LANE_ON, LANE_Q, LANE_SA, LANE_INV, LANE_FRONT, LANE_W,
  LANE_U2, LANE_GAUSS, LANE_GC, LANE_ALPHA, LANE_BEHIND) = range(17)
 LANE_ROWS = 17
@@ -190,13 +191,12 @@ def _band(y_lo, y_hi, tile_size):
 
 @njit(inline="always", cache=True)
 def _replay_lane(lanes, i, xl, xr, pos, mx, my, ca, cb, cc, o, cut, alpha_min, alpha_max):
-    """(dx, dy, gauss, alpha, hit, unclamped) of a pair at lane i of its band: `_alpha_lane`'s tests, and the pixel
-    inside the box's columns (xl < x + 0.5 < xr) and before its last contributor (pos < last)."""
+    """(gauss, alpha, hit, unclamped) of a pair at lane i of its band: `_alpha_lane`'s tests, and the pixel inside
+    the box's columns (xl < x + 0.5 < xr) and before its last contributor (pos < last)."""
     x = lanes[LANE_X, i]
-    dx, dy = x - mx, lanes[LANE_Y, i] - my
-    gauss, alpha, hit, unclamped = _alpha_lane(dx, dy, ca, cb, cc, o, cut, alpha_min, alpha_max)
+    gauss, alpha, hit, unclamped = _alpha_lane(x - mx, lanes[LANE_Y, i] - my, ca, cb, cc, o, cut, alpha_min, alpha_max)
     hit = hit & (x > xl) & (x < xr) & (pos < lanes[LANE_LAST, i])
-    return dx, dy, gauss, alpha, hit, unclamped
+    return gauss, alpha, hit, unclamped
 
 
 @njit(fastmath={"contract", "reassoc"}, error_model="numpy", inline="never", cache=True)
@@ -208,8 +208,8 @@ def _gram_band(lanes, lo, hi, xl, xr, cg, pos, mx, my, ca, cb, cc, o, cut, alpha
     d = cg.shape[0]
     ww = 0.0
     for i in range(lo, hi):
-        _, _, _, alpha, hit, unclamped = _replay_lane(lanes, i, xl, xr, pos, mx, my, ca, cb, cc, o, cut, alpha_min,
-                                                      alpha_max)
+        _, alpha, hit, unclamped = _replay_lane(lanes, i, xl, xr, pos, mx, my, ca, cb, cc, o, cut, alpha_min,
+                                                alpha_max)
         inv = 1.0 / (1.0 - alpha)
         t_front = lanes[LANE_TRANS, i] * inv
         w = alpha * t_front
@@ -336,8 +336,8 @@ def _backward_band(lanes, lo, hi, xl, xr, cg, pos, mx, my, ca, cb, cc, o, cut, a
     the front of the pair where it contributes."""
     d = cg.shape[0]
     for i in range(lo, hi):
-        _, _, gauss, alpha, hit, unclamped = _replay_lane(lanes, i, xl, xr, pos, mx, my, ca, cb, cc, o, cut,
-                                                          alpha_min, alpha_max)
+        gauss, alpha, hit, unclamped = _replay_lane(lanes, i, xl, xr, pos, mx, my, ca, cb, cc, o, cut, alpha_min,
+                                                    alpha_max)
         inv = 1.0 / (1.0 - alpha)
         lanes[LANE_HIT, i] = 1.0 if hit else 0.0
         lanes[LANE_ON, i] = 1.0 if hit & unclamped else 0.0

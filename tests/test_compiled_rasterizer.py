@@ -1,6 +1,7 @@
 """Compiled (numba) rasterizer backend vs its torch twin and the dense reference; backend selection and bad input."""
 import logging
 import math
+import os
 
 import pytest
 import torch
@@ -114,6 +115,21 @@ def test_compiled_matches_torch_twin(case, dtype):
         _assert_close_rel(a, b, TOL[dtype], f"{case} {dtype} {name}")
 
 
+@pytest.mark.parametrize("channels", [1, 2, 4, 6])
+def test_compiled_gram_matches_torch_twin_for_any_channel_count(channels):
+    # The compiled Gram takes colour channels three at a time, padding with zero channels it then drops: every count
+    # must give the torch twin's Gram (and 6 = two groups of three, no padding).
+    means2d, conics, opacities, _, depths, radii = random_2d_scene(30, 24, 20)
+    colors = torch.rand(30, channels, generator=torch.Generator().manual_seed(5), dtype=torch.float64)
+    background = torch.linspace(0.2, 0.9, channels, dtype=torch.float64)
+    scene = (means2d, conics, opacities, colors, depths, radii)
+    grams = [attribute_gram(*scene, 24, 20, background, RasterSettings(tile_size=4, backend=backend))
+             for backend in ("compiled", "torch")]
+    assert grams[0].shape == grams[1].shape == (30, 6 + channels, 6 + channels)
+    _assert_close_rel(grams[0], grams[1], TOL[torch.float64], f"{channels}-channel gram")
+    assert grams[1][:, :6, 6:].abs().sum() > 0  # the cross (geometry x colour) terms are exercised
+
+
 @pytest.mark.parametrize("case", list(CASES))
 def test_transmittance_only_forward_equals_the_full_forward(case):
     # The replays' forward (no colours) must leave the same final transmittance and last contributor.
@@ -196,6 +212,29 @@ def test_the_guard_fails_a_test_that_reaches_auto():
 
 
 @pytest.mark.auto_backend
+@pytest.mark.parametrize("host, preset, bits, expected", [
+    ("+avx2,+avx512f,+fma", None, None, "+avx2,+avx512f,+fma,-prefer-256-bit"),  # AVX-512: 512-bit vectors
+    ("+avx2,-avx512f,+fma", None, None, None),  # no AVX-512: numba's defaults
+    ("+avx2,+avx512f,+fma", "+avx2", None, "+avx2"),  # the user's own features stay
+    ("+avx2,+avx512f,+fma", None, "256", None),  # opted out
+])
+def test_numba_vector_width_setting(monkeypatch, host, preset, bits, expected):
+    import llvmlite.binding as llvm
+
+    class Features:
+        def flatten(self):
+            return host
+
+    monkeypatch.setattr(llvm, "get_host_cpu_features", Features)
+    for name, value in (("NUMBA_CPU_FEATURES", preset), (compiled.VECTOR_BITS_ENV, bits)):
+        if value is None:
+            monkeypatch.delenv(name, raising=False)
+        else:
+            monkeypatch.setenv(name, value)
+    compiled.configure_numba_environment()
+    assert os.environ.get("NUMBA_CPU_FEATURES") == expected
+
+
 def test_auto_takes_compiled_on_cpu(monkeypatch):
     calls = []
     from gaussian_renderer.compiled import ops

@@ -108,9 +108,9 @@ def _forward(bins: CompiledBins, means2d, conics, opacities, colors, background,
     image = np.zeros((colors.shape[1], height, width))
     trans = np.ones((height, width))
     last = np.zeros((height, width), np.int32)
-    _use_torch_threads()
     row_kernels.forward(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height,
-                                      settings), float(settings.transmittance_min), image, trans, last)
+                                      settings), float(settings.transmittance_min), image, trans, last,
+                        _use_torch_threads())
     return image, trans, last
 
 

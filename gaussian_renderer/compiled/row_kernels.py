@@ -106,45 +106,49 @@ def _forward_box(trans, live, last, weight, color, cg, a0, rows, stride, n, m, x
 
 @njit(parallel=True, cache=True)
 def forward(offsets, ids, rects, geom, colors, background, width, height, tile_size, tiles_x, alpha_min, alpha_max,
-            trans_min, image, trans_out, last_out):
+            trans_min, image, trans_out, last_out, num_slices):
     """Front-to-back compositing, row-vectorised. Writes image [D, H, W] (background included),
-    trans_out [H, W] and last_out [H, W] (int32), as the torch path does."""
+    trans_out [H, W] and last_out [H, W] (int32), as the torch path does. Tiles are interleaved over `num_slices`
+    threads, as in the replays: a plain prange hands each thread a contiguous half of the image, and the halves of a
+    scene rarely hold the same number of pairs (garden: 252k and 365k)."""
     num_tiles = offsets.shape[0] - 1
     d = colors.shape[1]
     stride = tile_size + LANES
     num_px = tile_size * stride
-    for t in prange(num_tiles):
-        px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
-        trans = np.ones(num_px)
-        live = np.zeros(num_px)  # 1.0 while a pixel composites, 0.0 once finished or outside the image
-        color = np.zeros((d, num_px))
-        last = np.zeros(num_px, np.int32)
-        weight = np.empty(stride)
-        remaining = 0
-        for y in range(min(tile_size, height - py0)):
-            for x in range(min(tile_size, width - px0)):
-                live[y * stride + x] = 1.0
-                remaining += 1
-        start, end = offsets[t], offsets[t + 1]
-        for k in range(start, end):
-            if remaining == 0:
-                break
-            g = ids[k]
-            x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
-            if x_hi < x_lo or y_hi < y_lo:  # the reach box misses the tile
-                continue
-            mx, my = geom[g, 0] - px0, geom[g, 1] - py0
-            a0, rows, step, n, m = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
-            remaining -= _forward_box(trans, live, last, weight, color, colors[g], a0, rows, step, n, m, x_lo + 0.5,
-                                      np.int32(k - start + 1), mx, y_lo + 0.5 - my, geom[g, 2], geom[g, 3], geom[g, 4],
-                                      geom[g, 5], geom[g, 6], alpha_min, alpha_max, trans_min)
-        for y in range(min(tile_size, height - py0)):
-            for x in range(min(tile_size, width - px0)):
-                p = y * stride + x
-                for ch in range(d):
-                    image[ch, py0 + y, px0 + x] = color[ch, p] + trans[p] * background[ch]
-                trans_out[py0 + y, px0 + x] = trans[p]
-                last_out[py0 + y, px0 + x] = last[p]
+    for sl in prange(num_slices):  # interleaved tiles
+        for t in range(sl, num_tiles, num_slices):
+            px0, py0 = (t % tiles_x) * tile_size, (t // tiles_x) * tile_size
+            trans = np.ones(num_px)
+            live = np.zeros(num_px)  # 1.0 while a pixel composites, 0.0 once finished or outside the image
+            color = np.zeros((d, num_px))
+            last = np.zeros(num_px, np.int32)
+            weight = np.empty(stride)
+            remaining = 0
+            for y in range(min(tile_size, height - py0)):
+                for x in range(min(tile_size, width - px0)):
+                    live[y * stride + x] = 1.0
+                    remaining += 1
+            start, end = offsets[t], offsets[t + 1]
+            for k in range(start, end):
+                if remaining == 0:
+                    break
+                g = ids[k]
+                x_lo, x_hi, y_lo, y_hi = _pair_box(geom, rects, g, px0, py0, tile_size)
+                if x_hi < x_lo or y_hi < y_lo:  # the reach box misses the tile
+                    continue
+                mx, my = geom[g, 0] - px0, geom[g, 1] - py0
+                a0, rows, step, n, m = _box_layout(x_lo, x_hi, y_lo, y_hi, stride)
+                remaining -= _forward_box(trans, live, last, weight, color, colors[g], a0, rows, step, n, m,
+                                          x_lo + 0.5, np.int32(k - start + 1), mx, y_lo + 0.5 - my, geom[g, 2],
+                                          geom[g, 3], geom[g, 4], geom[g, 5], geom[g, 6], alpha_min, alpha_max,
+                                          trans_min)
+            for y in range(min(tile_size, height - py0)):
+                for x in range(min(tile_size, width - px0)):
+                    p = y * stride + x
+                    for ch in range(d):
+                        image[ch, py0 + y, px0 + x] = color[ch, p] + trans[p] * background[ch]
+                    trans_out[py0 + y, px0 + x] = trans[p]
+                    last_out[py0 + y, px0 + x] = last[p]
 
 
 # The replays' tile state (`_band_lanes`): a lane per pixel of the tile, row-major with the tile's width as stride,

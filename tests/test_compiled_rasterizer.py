@@ -211,7 +211,6 @@ def test_the_guard_fails_a_test_that_reaches_auto():
         attribute_gram(*random_2d_scene(5, 8, 8), 8, 8, BG, RasterSettings(backend="auto"))
 
 
-@pytest.mark.auto_backend
 @pytest.mark.parametrize("host, preset, bits, expected", [
     ("+avx2,+avx512f,+fma", None, None, "+avx2,+avx512f,+fma,-prefer-256-bit"),  # AVX-512: 512-bit vectors
     ("+avx2,-avx512f,+fma", None, None, None),  # no AVX-512: numba's defaults
@@ -235,6 +234,7 @@ def test_numba_vector_width_setting(monkeypatch, host, preset, bits, expected):
     assert os.environ.get("NUMBA_CPU_FEATURES") == expected
 
 
+@pytest.mark.auto_backend
 def test_auto_takes_compiled_on_cpu(monkeypatch):
     calls = []
     from gaussian_renderer.compiled import ops

@@ -3,6 +3,7 @@ import logging
 import math
 import os
 
+import numpy as np
 import pytest
 import torch
 
@@ -128,6 +129,19 @@ def test_compiled_gram_matches_torch_twin_for_any_channel_count(channels):
     assert grams[0].shape == grams[1].shape == (30, 6 + channels, 6 + channels)
     _assert_close_rel(grams[0], grams[1], TOL[torch.float64], f"{channels}-channel gram")
     assert grams[1][:, :6, 6:].abs().sum() > 0  # the cross (geometry x colour) terms are exercised
+
+
+def test_kernels_see_the_listed_gaussians_renumbered_by_first_appearance():
+    # The block lists in kernel indices must name the same Gaussians, in the same order, as the lists in ids.
+    from gaussian_renderer.compiled import kernels
+    lists = np.array([7, 2, 7, 9, 2, 4, 9, 7], np.int32)
+    order, renumbered = kernels.first_appearance_order(lists, 12)
+    assert order.tolist() == [7, 2, 9, 4] and renumbered.dtype == np.int32
+    assert order[renumbered].tolist() == lists.tolist()
+    means2d, conics, opacities, _, depths, radii = random_2d_scene(30, 24, 20)
+    bins = ops.bin_gaussians_compiled(means2d, conics, opacities, radii, depths, 24, 20, RasterSettings(tile_size=4))
+    assert sorted(bins.order.tolist()) == sorted(set(bins.order.tolist())) and len(bins.rects) == len(bins.order)
+    assert set(bins.order.tolist()) < set(range(30))  # the culled and off-screen Gaussians are not listed
 
 
 @pytest.mark.parametrize("case", list(CASES))

@@ -102,6 +102,25 @@ def _pair_box(geom, rects, g, px0, py0, tile_size):
             min(y_hi, rects[g, 3] - py0))
 
 
+@njit(cache=True)
+def first_appearance_order(lists, n):
+    """Renumber the Gaussians of the block lists `lists` [M] (ids < n) by first appearance, so the kernels, which walk
+    the lists block by block, read and write per-Gaussian rows that lie close together in memory. Returns order [n']
+    (kernel index -> Gaussian id, each listed Gaussian once) and the lists in kernel indices [M] (int32)."""
+    slot = np.full(n, -1, np.int32)
+    order = np.empty(n, np.int64)
+    out = np.empty(lists.shape[0], np.int32)
+    count = 0
+    for k in range(lists.shape[0]):
+        g = lists[k]
+        if slot[g] < 0:
+            slot[g] = count
+            order[count] = g
+            count += 1
+        out[k] = slot[g]
+    return order[:count].copy(), out
+
+
 @njit(parallel=True, cache=True)
 def _sum_slices(buf):
     """Sum [S, N, K] over the slices. [N, K]"""

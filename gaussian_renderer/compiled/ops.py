@@ -31,10 +31,11 @@ class CompiledBins:
     """
 
     offsets: np.ndarray  # [B + 1] int64: block b's list is ids[offsets[b]:offsets[b + 1]]
-    ids: np.ndarray  # [M] int32 Gaussian ids, front to back within each block
+    ids: np.ndarray  # [M] int32 kernel indices, front to back within each block
     blocks_x: int
     block: int  # pixels per block side
-    rects: np.ndarray  # [N, 4] int64 inclusive pixel rectangle x0, x1, y0, y1 of each listed Gaussian
+    rects: np.ndarray  # [n, 4] int64 inclusive pixel rectangle x0, x1, y0, y1 of each listed Gaussian (kernel index)
+    order: torch.Tensor  # [n] int64 Gaussian id of each kernel index: listed Gaussians by first appearance
 
 
 def _use_torch_threads() -> int:
@@ -70,7 +71,10 @@ def _float64(t: torch.Tensor) -> np.ndarray:
 def bin_gaussians_compiled(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.Tensor,
                            radii: torch.Tensor, depths: torch.Tensor, width: int, height: int,
                            settings: RasterSettings) -> CompiledBins:
-    """Block lists by a parallel counting sort; within a block, Gaussians keep their (stable) depth order."""
+    """Block lists by a parallel counting sort; within a block, Gaussians keep their (stable) depth order. The
+    kernels see the listed Gaussians only, renumbered by first appearance (`kernels.first_appearance_order`): their
+    per-Gaussian reads and writes then stay close in memory (garden 1296x840: forward 1.18x, Gram 1.11-1.17x,
+    backward 1.15x against the model's own order, whose neighbours are scattered over the image)."""
     tile_size = settings.tile_size
     per_block = max(1, BLOCK_PIXELS // tile_size)  # tiles per block side
     block = per_block * tile_size
@@ -80,26 +84,37 @@ def bin_gaussians_compiled(means2d: torch.Tensor, conics: torch.Tensor, opacitie
         ids = ids[torch.argsort(depths.detach()[ids], stable=True)]  # depth order, ties by id (as the torch path)
         x0, x1, y0, y1 = tile_ranges(means2d.detach()[ids], conics.detach()[ids], opacities.detach()[ids],
                                      radii[ids], width, height, tile_size, settings.alpha_min)  # [n] each, tiles
-        rects = torch.zeros(means2d.shape[0], 4, dtype=torch.int64)
+        rects = torch.zeros(means2d.shape[0], 4, dtype=torch.int64)  # [N, 4]
         rects[ids] = torch.stack([x0 * tile_size, (x1 + 1) * tile_size - 1, y0 * tile_size,
                                   (y1 + 1) * tile_size - 1], 1)
     threads = _use_torch_threads()
     offsets, lists = kernels.bin_tiles(_numpy(x0 // per_block), _numpy(x1 // per_block), _numpy(y0 // per_block),
                                        _numpy(y1 // per_block), _numpy(ids), blocks_x * blocks_y, blocks_x, threads)
-    return CompiledBins(offsets, lists, blocks_x, block, rects.numpy())
+    order, lists = kernels.first_appearance_order(lists, means2d.shape[0])
+    order = torch.from_numpy(order)
+    return CompiledBins(offsets, lists, blocks_x, block, rects[order].numpy(), order)
+
+
+def scatter_rows(rows: np.ndarray, bins: CompiledBins, n: int) -> torch.Tensor:
+    """Per-Gaussian kernel output [n', K] (kernel indices) as [n, K] in Gaussian ids, zero for unlisted Gaussians."""
+    out = torch.zeros(n, rows.shape[1], dtype=torch.float64)
+    out[bins.order] = torch.from_numpy(rows)
+    return out
 
 
 def _kernel_args(bins: CompiledBins, means2d, conics, opacities, colors, background, width: int, height: int,
                  settings: RasterSettings) -> tuple:
     """The arguments every kernel starts with: bins and reach rectangles, packed float64 attributes (`kernels`
-    module docstring), colours, background, image and block geometry, alpha cut-offs."""
+    module docstring) and colours of the listed Gaussians in kernel order, background, image and block geometry,
+    alpha cut-offs."""
     with torch.no_grad():
-        o = opacities.detach().double()
+        o = opacities.detach()[bins.order].double()
         cut = torch.log(settings.alpha_min / o.clamp_min(1e-300)) - 1e-9
-        geom = torch.cat([means2d.detach().double(), conics.detach().double(), o[:, None], cut[:, None],
-                          torch.zeros_like(o)[:, None]], dim=1)  # [N, 8]
-    return (bins.offsets, bins.ids, bins.rects, geom.numpy(), _float64(colors), _float64(background), width, height,
-            bins.block, bins.blocks_x, float(settings.alpha_min), float(settings.alpha_max))
+        geom = torch.cat([means2d.detach()[bins.order].double(), conics.detach()[bins.order].double(), o[:, None],
+                          cut[:, None], torch.zeros_like(o)[:, None]], dim=1)  # [n', 8]
+    return (bins.offsets, bins.ids, bins.rects, geom.numpy(), _float64(colors.detach()[bins.order]),
+            _float64(background), width, height, bins.block, bins.blocks_x, float(settings.alpha_min),
+            float(settings.alpha_max))
 
 
 def _forward(bins: CompiledBins, means2d, conics, opacities, colors, background, width: int, height: int,
@@ -150,7 +165,7 @@ class _RasterizeCompiled(torch.autograd.Function):
         out = row_kernels.backward(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height,
                                              settings), trans.numpy(), last.numpy(), _float64(g_img), _float64(g_alpha),
                                _use_torch_threads())
-        grad = torch.from_numpy(out).to(means2d.dtype)  # [N, 6 + D]
+        grad = scatter_rows(out, bins, means2d.shape[0]).to(means2d.dtype)  # [N, 6 + D]
         grad_bg = (g_img * trans).sum((1, 2)).to(background.dtype)
         geo = NUM_GEOMETRY_ATTRIBUTES
         return (grad[:, 0:2], grad[:, 2:5], grad[:, 5], grad[:, geo:], grad_bg, None, None, None, None)
@@ -180,10 +195,19 @@ def attribute_gram_compiled(means2d: torch.Tensor, conics: torch.Tensor, opaciti
     pixel_weights = np.ones((height, width)) if weights is None else _float64(weights)
     sums = row_kernels.gram(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height,
                                           settings), trans, last, pixel_weights,
-                            _use_torch_threads())  # [N, 15 + 6 D + 1]
-    rows = kernels.nonzero_rows(sums) if seen_only else np.arange(sums.shape[0], dtype=np.int64)
-    gram = torch.from_numpy(kernels.assemble_gram(sums, _float64(conics), _float64(opacities), d, rows))
-    return (torch.from_numpy(rows), gram) if seen_only else gram
+                            _use_torch_threads())  # [n', 15 + 6 D + 1], kernel indices
+    conics_k, opacities_k = _float64(conics.detach()[bins.order]), _float64(opacities.detach()[bins.order])
+    if not seen_only:
+        gram = kernels.assemble_gram(sums, conics_k, opacities_k, d, np.arange(sums.shape[0], dtype=np.int64))
+        a = NUM_GEOMETRY_ATTRIBUTES + d
+        full = torch.zeros(means2d.shape[0], a, a, dtype=torch.float64)  # [N, A, A]
+        full[bins.order] = torch.from_numpy(gram)
+        return full
+    rows = kernels.nonzero_rows(sums)  # kernel indices; in ascending Gaussian ids:
+    ids = bins.order[torch.from_numpy(rows)]
+    ids, by_id = torch.sort(ids)
+    rows = rows[by_id.numpy()]
+    return ids, torch.from_numpy(kernels.assemble_gram(sums, conics_k, opacities_k, d, rows))
 
 
 # raw parameter groups and their widths in the Jacobian's columns (sh_rest: 3 (K - 1)), as `projection_kernels`

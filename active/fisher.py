@@ -88,14 +88,14 @@ def fisher_view_blocks(gaussians: GaussianModel, camera: Camera, background: tor
 def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
                         settings: RasterSettings, sigma: float = 1.0,
                         param_groups: tuple[str, ...] = FISHER_PARAM_GROUPS["default"],
-                        backend: str = "auto") -> ViewFactors:
+                        backend: str = "auto", dtype: torch.dtype = torch.float64) -> ViewFactors:
     """`fisher_view_blocks` over the Gaussians the view sees, as PSD factors: H_v,i = R_i R_i^T with
     R_i = sigma^-1 J_proj,i^T C_i, C_i C_i^T the PSD part of the attribute Gram G_i (`active.logdet.gram_root_factors`:
     pivoted Cholesky in numba with `backend` "auto"/"compiled", the eigen-clamping twin with "torch"). The projection
     Jacobian is computed for the visible Gaussians only.
 
     Returns:
-        indices [n] of the Gaussians with a non-zero Gram, factors [n, P, A] float64.
+        indices [n] of the Gaussians with a non-zero Gram, factors [n, P, A] in `dtype` (computed in float64).
     """
     with torch.no_grad():
         for group in param_groups:  # the dense blocks of every Gaussian would carry a NaN parameter: refuse it too
@@ -104,7 +104,7 @@ def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: to
         check_finite(gram, "view", gaussians.num_gaussians)
         jac = _projection_jacobian(gaussians, camera, param_groups, settings.backend, indices)  # [n, A, P]
         check_finite(jac, "view", gaussians.num_gaussians)
-        factors = gram_root_factors(gram, jac, sigma, backend)  # R [n, P, A]
+        factors = gram_root_factors(gram, jac, sigma, backend, dtype)  # R [n, P, A]
     return ViewFactors(indices, factors, gaussians.num_gaussians)
 
 
@@ -252,12 +252,13 @@ class FisherViewBlocks:
     _seen: set = field(default_factory=set)
 
     def compute(self, view_id: int) -> ViewFactors | torch.Tensor:
-        """The factors (float64) or diagonals [N, P] of `cameras[view_id]`, timed, never cached."""
+        """The factors (in `FACTOR_STORAGE`) or diagonals [N, P] of `cameras[view_id]`, timed, never cached."""
         t0 = time.perf_counter()
-        kernel = ((fisher_view_diagonals_reference if self.reference else fisher_view_diagonals) if self.diagonal
-                  else fisher_view_factors)
-        blocks = kernel(self.gaussians, self.cameras[view_id], self.background, self.settings,
-                        self.sigma, self.param_groups)
+        args = (self.gaussians, self.cameras[view_id], self.background, self.settings, self.sigma, self.param_groups)
+        if self.diagonal:
+            blocks = (fisher_view_diagonals_reference if self.reference else fisher_view_diagonals)(*args)
+        else:
+            blocks = fisher_view_factors(*args, dtype=FACTOR_STORAGE)
         self.fisher_seconds += time.perf_counter() - t0
         return blocks
 

@@ -162,16 +162,20 @@ def gram_root_factors_torch(gram: torch.Tensor, jac: torch.Tensor, sigma: float)
     return jac.transpose(1, 2) @ root
 
 
-def gram_root_factors(gram: torch.Tensor, jac: torch.Tensor, sigma: float, backend: str = "auto") -> torch.Tensor:
+def gram_root_factors(gram: torch.Tensor, jac: torch.Tensor, sigma: float, backend: str = "auto",
+                      dtype: torch.dtype = torch.float64) -> torch.Tensor:
     """The factors R_b [P, A] with R_b R_b^T = sigma^-2 J_b^T G_b+ J_b (G_b+: the PSD part of the attribute Gram): the
-    numba pivoted-Cholesky kernel on the CPU, else (or with backend="torch") the eigen-decomposition twin.
-    gram [n, A, A], jac [n, A, P] float64 -> R [n, P, A] float64"""
+    numba pivoted-Cholesky kernel on the CPU, else (or with backend="torch") the eigen-decomposition twin. Computed in
+    float64 and returned in `dtype` (float32: what a cache stores, written directly, no float64 copy).
+    gram [n, A, A], jac [n, A, P] float64 -> R [n, P, A]"""
     if not _compiled(backend, gram) or gram.shape[0] == 0:
-        return gram_root_factors_torch(gram, jac, sigma)
+        return gram_root_factors_torch(gram, jac, sigma).to(dtype)
     from active import logdet_kernels
-    out = logdet_kernels.gram_root_factors(gram.double().contiguous().numpy(), jac.double().contiguous().numpy(),
-                                           1.0 / sigma, _kernel_threads(gram.shape[0]))
-    return torch.from_numpy(out)
+    n, a, p = jac.shape
+    out = torch.empty(n, p, a, dtype=dtype)
+    logdet_kernels.gram_root_factors(gram.double().contiguous().numpy(), jac.double().contiguous().numpy(),
+                                     1.0 / sigma, _kernel_threads(n), out.numpy())
+    return out
 
 
 def _compiled(backend: str, tensor: torch.Tensor) -> bool:

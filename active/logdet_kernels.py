@@ -132,7 +132,7 @@ PIVOT_TOLERANCE = 2.220446049250313e-16  # float64 epsilon: a pivot <= A eps of 
 
 
 @njit(parallel=True, cache=True)
-def gram_root_factors(gram, jac, scale, num_slices):
+def gram_root_factors(gram, jac, scale, num_slices, out):
     """R_b = scale J_b^T C_b [P, A] with C_b C_b^T the PSD part of the attribute Gram G_b, by pivoted Cholesky.
 
     G_b is first equilibrated, S = D^-1/2 G_b D^-1/2 with D = diag(G_b) (the nine attributes differ by orders of
@@ -148,11 +148,11 @@ def gram_root_factors(gram, jac, scale, num_slices):
         jac: projection Jacobian d a / d theta, float64. [n, A, P]
         scale: 1 / sigma.
         num_slices: contiguous slices of blocks, one per thread.
+        out: where R goes, float64 or float32 (computed in float64, rounded once when stored). [n, P, A]
     Returns:
-        R, float64 (columns past the rank are 0). [n, P, A]
+        out: R (columns past the rank are 0), every entry written by the thread that owns the block.
     """
     n, a, p = jac.shape
-    out = np.empty((n, p, a))  # every entry written below, by the thread that owns the block (first touch)
     per = (n + num_slices - 1) // num_slices
     tol = a * PIVOT_TOLERANCE
     for s in prange(num_slices):

@@ -36,7 +36,7 @@ from pathlib import Path
 import torch
 
 from active import SelectionContext, build_selector, list_selectors, selector_options
-from active.fisher import (DiagonalGainOracle, FisherViewBlocks, fisher_view_blocks, fisher_view_diagonals,
+from active.fisher import (FACTOR_STORAGE, DiagonalGainOracle, fisher_view_blocks, fisher_view_diagonals,
                            fisher_view_factors, parameter_columns)
 from active.logdet import BlockGainOracle, BlockInformation, DenseBlockInformation
 from active.schedule import farthest_point_views
@@ -134,7 +134,7 @@ def main() -> None:
         return fisher_view_blocks(gaussians, cams[v], bg, settings)
 
     def factors(v):
-        return FisherViewBlocks.stored(fisher_view_factors(gaussians, cams[v], bg, settings))
+        return fisher_view_factors(gaussians, cams[v], bg, settings, dtype=FACTOR_STORAGE)
 
     def diagonals(v):
         return fisher_view_diagonals(gaussians, cams[v], bg, settings)

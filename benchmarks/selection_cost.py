@@ -26,8 +26,7 @@ import numpy as np
 import torch
 
 from active import fisher
-from active.fisher import (FISHER_PARAM_GROUPS, FisherViewBlocks, fisher_view_blocks,
-                           fisher_view_factors)
+from active.fisher import FACTOR_STORAGE, FISHER_PARAM_GROUPS, fisher_view_blocks, fisher_view_factors
 from active.logdet import BlockInformation, DenseBlockInformation, ViewFactors
 from active.schedule import farthest_point_views
 from gaussian_renderer import RasterSettings
@@ -130,7 +129,7 @@ def per_candidate(name: str, gaussians: GaussianModel, cams: list[Camera], bg: t
             continue
 
         def factors(v):
-            return FisherViewBlocks.stored(fisher_view_factors(gaussians, cams[v], bg, settings, 1.0, params))
+            return fisher_view_factors(gaussians, cams[v], bg, settings, 1.0, params, dtype=FACTOR_STORAGE)
 
         prior_views = [fisher_view_factors(gaussians, cams[v], bg, settings, 1.0, params) for v in train]
         prior = sum(f.dense() for f in prior_views)  # [N, P, P]

@@ -41,6 +41,16 @@ def test_compiled_root_equals_torch_twin_and_the_blocks(rank):
     assert torch.count_nonzero(compiled[:, :, rank:]) == 0
 
 
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+def test_float32_factors_are_the_float64_ones_rounded_once(backend):
+    # What a cache stores: the kernel writes float32 directly, which must equal computing in float64 and rounding.
+    gram, jac = random_grams(100, 6, seed=3)
+    wide = gram_root_factors(gram, jac, 0.5, backend=backend)
+    narrow = gram_root_factors(gram, jac, 0.5, backend=backend, dtype=torch.float32)
+    assert wide.dtype == torch.float64 and narrow.dtype == torch.float32
+    assert torch.equal(narrow, wide.float())
+
+
 def test_roundoff_negative_and_zero_attributes_are_dropped_not_amplified():
     gram, jac = random_grams(50, 3, seed=7)
     gram = gram - 1e-14 * torch.eye(A, dtype=torch.float64) * torch.diagonal(gram, dim1=1, dim2=2)[:, :, None]

@@ -206,7 +206,7 @@ def _attribute_gram(gaussians: GaussianModel, camera: Camera, background: torch.
     # so the depth sort's ties fall as over all of them and the Grams are the same
     ids = torch.nonzero(proj.radii > 0).squeeze(1)
     means = gaussians.means[ids]
-    colors = sh_to_colors(gaussians.sh_coeffs[ids], means, camera.camera_center, gaussians.active_sh_degree)
+    colors = sh_to_colors(_sh_coeffs(gaussians, ids), means, camera.camera_center, gaussians.active_sh_degree)
     gram_of = seen_attribute_gram if seen_only else attribute_gram
     out = gram_of(proj.means2d[ids], proj.conics[ids], gaussians.opacities[ids], colors, proj.depths[ids],
                   proj.radii[ids], camera.width, camera.height, background, settings)
@@ -217,14 +217,20 @@ def _attribute_gram(gaussians: GaussianModel, camera: Camera, background: torch.
     return full
 
 
+def _sh_coeffs(gaussians: GaussianModel, ids: torch.Tensor) -> torch.Tensor:
+    """`gaussians.sh_coeffs[ids]` without concatenating every Gaussian's coefficients first. [n, K, 3]"""
+    return torch.cat([gaussians.params["sh_dc"][ids], gaussians.params["sh_rest"][ids]], dim=1)
+
+
 def _projection_jacobian(gaussians: GaussianModel, camera: Camera, param_groups: tuple[str, ...], backend: str,
                          indices: torch.Tensor | None = None) -> torch.Tensor:
     """J_proj [N, A, P] float64 of every Gaussian, or [n, A, P] of `indices` (Gaussians are independent), by the
     rasterizer `backend`'s path (`projection_jacobian`: the numba kernel on CPU with "auto"/"compiled")."""
     pick = (lambda t: t.detach()) if indices is None else (lambda t: t.detach()[indices])
     params = gaussians.params
+    sh = gaussians.sh_coeffs.detach() if indices is None else _sh_coeffs(gaussians, indices).detach()
     return projection_jacobian(pick(params["means"]), pick(params["quats"]), pick(params["log_scales"]),
-                               pick(params["logit_opacities"]), pick(gaussians.sh_coeffs), gaussians.active_sh_degree,
+                               pick(params["logit_opacities"]), sh, gaussians.active_sh_degree,
                                camera.viewmat, camera.intrinsics, camera.width, camera.height,
                                param_groups=param_groups, backend=backend).double()
 

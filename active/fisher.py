@@ -43,8 +43,8 @@ from typing import Callable
 import torch
 
 from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite, gram_root_factors
-from gaussian_renderer import (RasterSettings, attribute_gram, project_gaussians, projection_jacobian,
-                               seen_attribute_gram)
+from gaussian_renderer import (RasterSettings, attribute_gram, project_and_shade, project_gaussians,
+                               projection_jacobian, seen_attribute_gram)
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from gaussian_renderer.sh import sh_to_colors
 from scene.cameras import Camera
@@ -200,16 +200,15 @@ def _attribute_gram(gaussians: GaussianModel, camera: Camera, background: torch.
                     seen_only: bool = False) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
     """G [N, A, A] of one view (render + per-Gaussian Gram), float64; with `seen_only`, (indices [n], G [n, A, A]) of
     the Gaussians the view sees (`seen_attribute_gram`)."""
-    proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, camera.viewmat,
-                             camera.intrinsics, camera.width, camera.height)
+    params = {k: v.detach() for k, v in gaussians.params.items()}
     # only the projected Gaussians take part (colours, binning, the kernels' per-Gaussian buffers): [n] ids, in order,
     # so the depth sort's ties fall as over all of them and the Grams are the same
-    ids = torch.nonzero(proj.radii > 0).squeeze(1)
-    means = gaussians.means[ids]
-    colors = sh_to_colors(_sh_coeffs(gaussians, ids), means, camera.camera_center, gaussians.active_sh_degree)
+    proj, ids, colors = project_and_shade(params["means"], params["quats"], params["log_scales"], params["sh_dc"],
+                                          params["sh_rest"], gaussians.active_sh_degree, camera.viewmat,
+                                          camera.intrinsics, camera.width, camera.height, settings)
     gram_of = seen_attribute_gram if seen_only else attribute_gram
-    out = gram_of(proj.means2d[ids], proj.conics[ids], gaussians.opacities[ids], colors, proj.depths[ids],
-                  proj.radii[ids], camera.width, camera.height, background, settings)
+    out = gram_of(proj.means2d[ids], proj.conics[ids], torch.sigmoid(params["logit_opacities"][ids]), colors,
+                  proj.depths[ids], proj.radii[ids], camera.width, camera.height, background, settings)
     if seen_only:
         return ids[out[0]], out[1]
     full = out.new_zeros(gaussians.num_gaussians, *out.shape[1:])  # [N, A, A]

@@ -13,8 +13,8 @@ Conventions: world-to-camera `viewmat [4, 4]` in the OpenCV convention (x right,
 inside the projection; conics (a, b, c) = [[a, b], [b, c]], the inverse 2D covariance.
 """
 from gaussian_renderer.api import RasterOutput, rasterization
-from gaussian_renderer.fisher_partials import (attribute_gram, pixel_attribute_partials, projection_jacobian,
-                                              seen_attribute_gram)
+from gaussian_renderer.fisher_partials import (attribute_gram, pixel_attribute_partials, project_and_shade,
+                                              projection_jacobian, seen_attribute_gram)
 from gaussian_renderer.projection import Projection, camera_center, project_gaussians
 from gaussian_renderer.rasterize import rasterize
 from gaussian_renderer.renderer import RenderOutput, render
@@ -22,5 +22,6 @@ from gaussian_renderer.settings import RasterSettings
 from gaussian_renderer.sh import eval_sh, sh_to_colors
 
 __all__ = ["RasterOutput", "RasterSettings", "RenderOutput", "Projection", "attribute_gram", "camera_center", "eval_sh",
-           "pixel_attribute_partials", "project_gaussians", "projection_jacobian", "rasterization", "rasterize",
+           "pixel_attribute_partials", "project_and_shade", "project_gaussians", "projection_jacobian",
+           "rasterization", "rasterize",
            "render", "seen_attribute_gram", "sh_to_colors"]

@@ -5,6 +5,7 @@ so a view's per-Gaussian Fisher block is J_proj,i^T G_i J_proj,i with
 * `attribute_gram` -> G [N, A, A]: sum over pixels and channels of (dC/da_i)(dC/da_i)^T, by the rasterizer's
   closed-form per-pair replay;
 * `projection_jacobian` -> J_proj [N, A, P]: d a_i / d (raw parameters of Gaussian i);
+* `project_and_shade`: the render inputs of a view (projection, kept Gaussians, their colours) without gradients;
 * `pixel_attribute_partials`: the packed per-pair Jacobians themselves (small images; tests and inspection).
 """
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 import torch
 
 from gaussian_renderer.compiled import use_compiled
-from gaussian_renderer.projection import camera_center, project_gaussians
+from gaussian_renderer.projection import Projection, camera_center, project_gaussians
 from gaussian_renderer.projection_partials import projection_jacobian_closed_form
 from gaussian_renderer.settings import RasterSettings
 from gaussian_renderer.sh import num_sh_bases, sh_to_colors
@@ -78,6 +79,29 @@ def attribute_gram(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch
     gram[:, geo:, :geo] = prod[:, :, geo:].transpose(1, 2)
     gram[:, geo:, geo:] = sums[:, -1, None, None] * torch.eye(d, dtype=torch.float64, device=means2d.device)
     return gram
+
+
+@torch.no_grad()
+def project_and_shade(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor, sh_dc: torch.Tensor,
+                      sh_rest: torch.Tensor, sh_degree: int, viewmat: torch.Tensor, intrinsics: torch.Tensor,
+                      width: int, height: int,
+                      settings: RasterSettings | None = None) -> tuple[Projection, torch.Tensor, torch.Tensor]:
+    """A view's render inputs for the Fisher pass, from the raw parameters (wxyz quaternions of any norm, log-scales,
+    SH bands [N, 1, 3] and [N, K - 1, 3]): the projection, the ids [n] of the Gaussians it keeps (radius > 0) and
+    their colours [n, 3]. The compiled backend runs one numba kernel in float64
+    (`compiled.ops.project_and_shade_compiled`); the torch path, its twin, `project_gaussians` and `sh_to_colors`."""
+    settings = settings or RasterSettings()
+    if use_compiled(settings.backend, means):
+        from gaussian_renderer.compiled.ops import project_and_shade_compiled
+        proj, colors = project_and_shade_compiled(means, quats, log_scales, sh_dc, sh_rest, sh_degree, viewmat,
+                                                  intrinsics, width, height)
+        ids = torch.nonzero(proj.radii > 0).squeeze(1)
+        return proj, ids, colors[ids]
+    proj = project_gaussians(means, quats / quats.norm(dim=-1, keepdim=True), torch.exp(log_scales), viewmat,
+                             intrinsics, width, height)
+    ids = torch.nonzero(proj.radii > 0).squeeze(1)
+    sh = torch.cat([sh_dc[ids], sh_rest[ids]], dim=1)  # [n, K, 3]
+    return proj, ids, sh_to_colors(sh, means[ids], camera_center(viewmat), sh_degree)
 
 
 @torch.no_grad()

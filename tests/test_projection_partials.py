@@ -89,3 +89,29 @@ def test_float32_close_to_float64():
     visible[0] = False
     err = (j32.double() - j64)[visible].abs().max() / j64[visible].abs().max()
     assert err < 1e-5
+
+
+@pytest.mark.skipif(numba_import_error() is not None, reason="numba is not importable")
+@pytest.mark.parametrize("degree", [0, 1, 3])
+def test_compiled_projection_and_colours_match_the_torch_functions(degree):
+    """`project_and_shade_compiled` (the Fisher pass's render inputs, one kernel) against its twin,
+    `project_gaussians` + `sh_to_colors` in float64: behind-camera, clamped, off-screen and clamped-colour rows
+    included, and a zero quaternion (NaN rotation: culled by both)."""
+    from gaussian_renderer.compiled.ops import project_and_shade_compiled
+    from gaussian_renderer.projection import camera_center, project_gaussians
+    from gaussian_renderer.sh import sh_to_colors
+    p = scene(degree)
+    p["means"][5] = torch.tensor([40.0, 0.0, 0.0], dtype=torch.float64)  # off-screen: culled
+    p["quats"][6] = 0.0
+    sh = p["sh_coeffs"]
+    proj, colors = project_and_shade_compiled(p["means"], p["quats"], p["log_scales"], sh[:, :1], sh[:, 1:], degree,
+                                              VIEW, K, W, H)
+    unit = p["quats"] / p["quats"].norm(dim=-1, keepdim=True)
+    twin = project_gaussians(p["means"], unit, p["log_scales"].exp(), VIEW, K, W, H)
+    assert torch.equal(proj.radii, twin.radii) and (twin.radii == 0).sum() >= 3 and (twin.radii > 0).sum() >= 6
+    kept = twin.radii > 0
+    for name in ("means2d", "conics", "depths"):
+        torch.testing.assert_close(getattr(proj, name)[kept], getattr(twin, name)[kept], rtol=1e-12, atol=1e-12)
+    twin_colors = sh_to_colors(sh, p["means"], camera_center(VIEW), degree)
+    torch.testing.assert_close(colors[kept], twin_colors[kept], rtol=1e-12, atol=1e-12)
+    assert (colors[~kept] == 0).all() and (twin_colors[kept] == 0).any()  # a clamped channel among the kept

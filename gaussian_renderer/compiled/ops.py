@@ -242,3 +242,28 @@ def projection_jacobian_compiled(means: torch.Tensor, quats: torch.Tensor, log_s
         *inputs, sh_degree, _numpy(view[:3, :3]), _numpy(view[:3, 3]), _float64(camera_center(view)), _numpy(intr),
         _numpy(limits), float(near_plane), float(dilation), cols, out, _use_torch_threads())
     return torch.from_numpy(out)
+
+
+@torch.no_grad()
+def project_and_shade_compiled(means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor,
+                               sh_dc: torch.Tensor, sh_rest: torch.Tensor, sh_degree: int, viewmat: torch.Tensor,
+                               intrinsics: torch.Tensor, width: int, height: int, near_plane: float = 0.01,
+                               dilation: float = 0.3) -> tuple[Projection, torch.Tensor]:
+    """`projection.project_gaussians` of the raw parameters (quaternions normalised, scales exponentiated inside) and
+    `sh.sh_to_colors` of the Gaussians it keeps, by one numba kernel, float64, no gradients: (Projection, colours
+    [N, 3], 0 where culled). The torch functions are its twin (tests/test_projection_partials.py)."""
+    from gaussian_renderer.compiled import projection_kernels
+    from gaussian_renderer.projection import Projection, camera_center, frustum_limits
+
+    n = means.shape[0]
+    view, intr = viewmat.detach().double(), intrinsics.detach().double()
+    (neg_x, pos_x), (neg_y, pos_y) = frustum_limits(*intr.unbind(-1), width, height)
+    out = {"means2d": np.empty((n, 2)), "conics": np.empty((n, 3)), "depths": np.empty(n),
+           "radii": np.empty(n, np.int64)}
+    colors = np.empty((n, 3))
+    projection_kernels.project_and_shade_kernel(
+        *(_numpy(t.detach()) for t in (means, quats, log_scales, sh_dc, sh_rest)), sh_degree, _numpy(view[:3, :3]),
+        _numpy(view[:3, 3]), _float64(camera_center(view)), _numpy(intr),
+        _numpy(torch.stack([neg_x, pos_x, neg_y, pos_y])), float(near_plane), float(dilation), width, height,
+        out["means2d"], out["conics"], out["depths"], out["radii"], colors, _use_torch_threads())
+    return Projection(**{k: torch.from_numpy(v) for k, v in out.items()}), torch.from_numpy(colors)

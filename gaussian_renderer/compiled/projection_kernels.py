@@ -19,6 +19,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from gaussian_renderer.projection import MAX_RADIUS, SIGMA_EXTENT
 from gaussian_renderer.sh import C0, C1, C2, C3
 
 _C2_0, _C2_1, _C2_2, _C2_3, _C2_4 = C2
@@ -254,3 +255,70 @@ def projection_jacobian_kernel(means, quats, log_scales, logit_opacities, sh, de
                 for k in range(1, min(k_active, k_all)):
                     for ch in range(3):
                         out[i, 6 + ch, cols[5] + 3 * (k - 1) + ch] = live[ch] * vals[k]
+
+
+@njit(parallel=True, cache=True)
+def project_and_shade_kernel(means, quats, log_scales, sh_dc, sh_rest, degree, view_rot, view_trans, center,
+                             intrinsics, limits, near_plane, dilation, width, height, means2d, conics, depths, radii,
+                             colors, num_slices):
+    """`projection.project_gaussians` and, for the Gaussians it keeps (radius > 0), `sh.sh_to_colors`, in float64
+    without gradients (the Fisher pass's render). Inputs as `projection_jacobian_kernel`'s (sh_dc [N, 1, 3], sh_rest
+    [N, K - 1, 3]); fills means2d [N, 2], conics [N, 3], depths [N], radii [N] (int64, 0 = culled) and colors [N, 3]
+    (0 where culled)."""
+    n = means.shape[0]
+    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    step = (n + num_slices - 1) // num_slices
+    for s in prange(num_slices):
+        t = np.empty(3)
+        tc = np.empty(2)
+        rmat = np.empty((3, 3))
+        d_rmat = np.empty((4, 3, 3))  # the rotation's tangents, unused here
+        jw = np.empty((2, 3))  # J W, W = view_rot R(q) S: the 2D covariance is (J W)(J W)^T + dilation I
+        vals = np.empty(16)
+        grads = np.empty((16, 3))  # the SH basis's gradients, unused here
+        for i in range(s * step, min(n, (s + 1) * step)):
+            for a in range(3):
+                t[a] = view_trans[a] + view_rot[a, 0] * means[i, 0] + view_rot[a, 1] * means[i, 1] \
+                    + view_rot[a, 2] * means[i, 2]
+            in_front = t[2] > near_plane
+            zs = t[2] if in_front else 1.0
+            for ax in range(2):  # x/z, y/z clamped to the frustum limits before building J
+                tc[ax] = zs * min(max(t[ax] / zs, -limits[2 * ax]), limits[2 * ax + 1])
+            _rotation_and_tangents(np.float64(quats[i, 0]), np.float64(quats[i, 1]), np.float64(quats[i, 2]),
+                                   np.float64(quats[i, 3]), rmat, d_rmat)
+            for k in range(3):
+                scale = math.exp(np.float64(log_scales[i, k]))
+                w0 = scale * (view_rot[0, 0] * rmat[0, k] + view_rot[0, 1] * rmat[1, k] + view_rot[0, 2] * rmat[2, k])
+                w1 = scale * (view_rot[1, 0] * rmat[0, k] + view_rot[1, 1] * rmat[1, k] + view_rot[1, 2] * rmat[2, k])
+                w2 = scale * (view_rot[2, 0] * rmat[0, k] + view_rot[2, 1] * rmat[1, k] + view_rot[2, 2] * rmat[2, k])
+                jw[0, k] = fx / zs * w0 - fx * tc[0] / (zs * zs) * w2
+                jw[1, k] = fy / zs * w1 - fy * tc[1] / (zs * zs) * w2
+            cov_a = jw[0, 0] * jw[0, 0] + jw[0, 1] * jw[0, 1] + jw[0, 2] * jw[0, 2] + dilation
+            cov_b = jw[0, 0] * jw[1, 0] + jw[0, 1] * jw[1, 1] + jw[0, 2] * jw[1, 2]
+            cov_c = jw[1, 0] * jw[1, 0] + jw[1, 1] * jw[1, 1] + jw[1, 2] * jw[1, 2] + dilation
+            det = cov_a * cov_c - cov_b * cov_b
+            finite_t = math.isfinite(t[0]) and math.isfinite(t[1]) and math.isfinite(t[2])
+            q_norm2 = quats[i, 0] ** 2 + quats[i, 1] ** 2 + quats[i, 2] ** 2 + quats[i, 3] ** 2  # 0: the model's
+            valid = in_front and det > 0 and math.isfinite(det) and finite_t and q_norm2 > 0  # unit_quats are NaN
+            det_safe = det if valid else 1.0
+            conics[i, 0], conics[i, 1], conics[i, 2] = cov_c / det_safe, -cov_b / det_safe, cov_a / det_safe
+            u, v = fx * t[0] / zs + cx, fy * t[1] / zs + cy
+            means2d[i, 0], means2d[i, 1] = u, v
+            depths[i] = t[2]
+            mid = 0.5 * (cov_a + cov_c)
+            lam_max = mid + math.sqrt(max(mid * mid - det_safe, 0.0))  # largest eigenvalue of the 2D covariance
+            r = min(np.ceil(SIGMA_EXTENT * math.sqrt(lam_max)), MAX_RADIUS) if lam_max >= 0.0 else 0.0  # NaN: 0
+            on_screen = u + r > 0 and u - r < width and v + r > 0 and v - r < height
+            radii[i] = int(r) if valid and on_screen else 0
+            for ch in range(3):
+                colors[i, ch] = 0.0
+            if radii[i] == 0:
+                continue
+            ux, uy, uz = means[i, 0] - center[0], means[i, 1] - center[1], means[i, 2] - center[2]
+            dist = max(math.sqrt(ux * ux + uy * uy + uz * uz), 1e-12)
+            _sh_basis(ux / dist, uy / dist, uz / dist, degree, vals, grads)
+            for ch in range(3):
+                acc = vals[0] * sh_dc[i, 0, ch]
+                for k in range(1, (degree + 1) * (degree + 1)):
+                    acc += vals[k] * sh_rest[i, k - 1, ch]
+                colors[i, ch] = max(acc + 0.5, 0.0)

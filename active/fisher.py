@@ -43,10 +43,9 @@ from typing import Callable
 import torch
 
 from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite, gram_root_factors
-from gaussian_renderer import (RasterSettings, attribute_gram, project_and_shade, project_gaussians,
-                               projection_jacobian, seen_attribute_gram)
+from gaussian_renderer import (RasterSettings, attribute_gram, project_and_shade, projection_jacobian,
+                               seen_attribute_gram)
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
-from gaussian_renderer.sh import sh_to_colors
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 from utils.errors import UserError
@@ -152,13 +151,8 @@ def fisher_view_diagonals_reference(gaussians: GaussianModel, camera: Camera, ba
                         "--fisherrf_params")
     jac, gram = _jacobian_and_gram(gaussians, camera, background, settings, param_groups)  # [N, A, P], [N, A, A]
     exact = torch.einsum("nap,nab,nbp->np", jac, gram, jac)  # per-channel squares [N, P]
-    with torch.no_grad():
-        proj = project_gaussians(gaussians.means, gaussians.unit_quats, gaussians.scales, camera.viewmat,
-                                 camera.intrinsics, camera.width, camera.height)
-        colors = sh_to_colors(gaussians.sh_coeffs, gaussians.means, camera.camera_center, gaussians.active_sh_degree)
-        gram_sum = attribute_gram(proj.means2d, proj.conics, gaussians.opacities, colors.sum(1, keepdim=True),
-                                  proj.depths, proj.radii, camera.width, camera.height,
-                                  background.sum().reshape(1), settings)  # [N, 7, 7] of the channel-summed image
+    with torch.no_grad():  # [N, 7, 7] of the channel-summed image
+        gram_sum = _attribute_gram(gaussians, camera, background, settings, sum_channels=True)
     lift = torch.zeros(9, 7, dtype=torch.float64, device=gram_sum.device)  # channel-summed partials, 7 -> 9 attributes
     lift[:6, :6] = torch.eye(6, dtype=torch.float64, device=gram_sum.device)
     lift[6:, 6] = 1.0  # d(sum_c I_c)/d colour_c' = the blending weight, for every c'
@@ -197,15 +191,19 @@ def _jacobian_and_gram(gaussians: GaussianModel, camera: Camera, background: tor
 
 
 def _attribute_gram(gaussians: GaussianModel, camera: Camera, background: torch.Tensor, settings: RasterSettings,
-                    seen_only: bool = False) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+                    seen_only: bool = False,
+                    sum_channels: bool = False) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
     """G [N, A, A] of one view (render + per-Gaussian Gram), float64; with `seen_only`, (indices [n], G [n, A, A]) of
-    the Gaussians the view sees (`seen_attribute_gram`)."""
+    the Gaussians the view sees (`seen_attribute_gram`); with `sum_channels`, of the one-channel image whose colour
+    is the sum of the three (A = 7)."""
     params = {k: v.detach() for k, v in gaussians.params.items()}
     # only the projected Gaussians take part (colours, binning, the kernels' per-Gaussian buffers): [n] ids, in order,
     # so the depth sort's ties fall as over all of them and the Grams are the same
     proj, ids, colors = project_and_shade(params["means"], params["quats"], params["log_scales"], params["sh_dc"],
                                           params["sh_rest"], gaussians.active_sh_degree, camera.viewmat,
                                           camera.intrinsics, camera.width, camera.height, settings)
+    if sum_channels:
+        colors, background = colors.sum(1, keepdim=True), background.sum().reshape(1)
     gram_of = seen_attribute_gram if seen_only else attribute_gram
     out = gram_of(proj.means2d[ids], proj.conics[ids], torch.sigmoid(params["logit_opacities"][ids]), colors,
                   proj.depths[ids], proj.radii[ids], camera.width, camera.height, background, settings)

@@ -131,9 +131,15 @@ def per_candidate(name: str, gaussians: GaussianModel, cams: list[Camera], bg: t
         def factors(v):
             return fisher_view_factors(gaussians, cams[v], bg, settings, 1.0, params, dtype=FACTOR_STORAGE)
 
-        prior_views = [fisher_view_factors(gaussians, cams[v], bg, settings, 1.0, params) for v in train]
-        prior = sum(f.dense() for f in prior_views)  # [N, P, P]
+        prior = None  # [N, P, P], summed in place: full-SH blocks at the garden are 3.9 GB a copy
+        for v in train:
+            blocks = fisher_view_factors(gaussians, cams[v], bg, settings, 1.0, params).dense()
+            prior = blocks if prior is None else prior.add_(blocks)
+            del blocks
         new = BlockInformation(prior)
+        warm_prior = prior[:1].clone()
+        if not do_old:  # only the dense path needs it again
+            del prior
         t_fisher, views = [], []
         for v in candidates[:repeats]:
             t, view = timed(lambda v=v: factors(v), 1)
@@ -142,7 +148,7 @@ def per_candidate(name: str, gaussians: GaussianModel, cams: list[Camera], bg: t
         t_fisher = statistics.median(t_fisher)
         new.gain(views[0])  # compile (numba caches on disk) the gain and the commit for this factor dtype
         warm = ViewFactors(torch.zeros(1, dtype=torch.long), views[0].factors[:1], 1)
-        BlockInformation(prior[:1]).add(warm)
+        BlockInformation(warm_prior).add(warm)
         t_gain = statistics.median(timed(lambda v=v: new.gain(v), 3)[0] for v in views)
         mean_bytes = sum(v.nbytes for v in views) / len(views)
         seen = sum(v.indices.numel() for v in views) / len(views)
@@ -153,7 +159,7 @@ def per_candidate(name: str, gaussians: GaussianModel, cams: list[Camera], bg: t
                "stage_cache_old_mb": num_candidates * n * p * p * 8 / 2**20,
                "gain_floor_ms": 1e3 * gain_flops(int(seen), p, 9) / peak,
                "commit_floor_ms": 1e3 * commit_flops(int(seen), p, 9) / peak}
-        commit_info = BlockInformation(prior)
+        commit_info = BlockInformation(prior) if do_old else new  # without the dense path, `new` is not used again
         row["commit_new_ms"] = 1e3 * timed(lambda: commit_info.add(views[0]), 1)[0]
         if do_old:
             old = DenseBlockInformation(prior)

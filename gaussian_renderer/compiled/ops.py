@@ -193,10 +193,10 @@ def attribute_gram_compiled(means2d: torch.Tensor, conics: torch.Tensor, opaciti
     bins = bin_gaussians_compiled(means2d, conics, opacities, radii, depths, width, height, settings)
     trans, last = transmittance_compiled(bins, means2d, conics, opacities, width, height, settings)
     pixel_weights = np.ones((height, width)) if weights is None else _float64(weights)
-    sums = row_kernels.gram(*_kernel_args(bins, means2d, conics, opacities, colors, background, width, height,
-                                          settings), trans, last, pixel_weights,
-                            _use_torch_threads())  # [n', 15 + 6 D + 1], kernel indices
-    conics_k, opacities_k = _float64(conics.detach()[bins.order]), _float64(opacities.detach()[bins.order])
+    args = _kernel_args(bins, means2d, conics, opacities, colors, background, width, height, settings)
+    sums = row_kernels.gram(*args, trans, last, pixel_weights, _use_torch_threads())  # [n', 15 + 6 D + 1], kernel idx
+    geom = args[3]  # [n', 8] packed attributes in kernel order: conic a, b, c in columns 2-4, opacity in 5
+    conics_k, opacities_k = np.ascontiguousarray(geom[:, 2:5]), np.ascontiguousarray(geom[:, 5])
     if not seen_only:
         gram = kernels.assemble_gram(sums, conics_k, opacities_k, d, np.arange(sums.shape[0], dtype=np.int64))
         a = NUM_GEOMETRY_ATTRIBUTES + d

@@ -254,21 +254,23 @@ class FisherViewBlocks:
     _cached_bytes: int = 0
     _seen: set = field(default_factory=set)
 
-    def compute(self, view_id: int) -> ViewFactors | torch.Tensor:
-        """The factors (in `FACTOR_STORAGE`) or diagonals [N, P] of `cameras[view_id]`, timed, never cached."""
+    def compute(self, view_id: int, dtype: torch.dtype = torch.float64) -> ViewFactors | torch.Tensor:
+        """The factors (in `dtype`, computed in float64) or diagonals [N, P] of `cameras[view_id]`, timed, never
+        cached."""
         t0 = time.perf_counter()
         args = (self.gaussians, self.cameras[view_id], self.background, self.settings, self.sigma, self.param_groups)
         if self.diagonal:
             blocks = (fisher_view_diagonals_reference if self.reference else fisher_view_diagonals)(*args)
         else:
-            blocks = fisher_view_factors(*args, dtype=FACTOR_STORAGE)
+            blocks = fisher_view_factors(*args, dtype=dtype)
         self.fisher_seconds += time.perf_counter() - t0
         return blocks
 
     @staticmethod
     def stored(blocks: ViewFactors | torch.Tensor) -> ViewFactors | torch.Tensor:
-        """What the cache keeps (and streaming mode serves, so both modes give the same gains): factors in
-        `FACTOR_STORAGE`, diagonals unchanged."""
+        """What the cache would keep of a view computed in float64 (the training views, for the cache-size estimate):
+        factors in `FACTOR_STORAGE`, diagonals unchanged. Candidates are computed in it directly (`__call__`), in both
+        modes, so both give the same gains."""
         return blocks.stored_as(FACTOR_STORAGE) if isinstance(blocks, ViewFactors) else blocks
 
     def use_streaming(self, reason: str) -> None:
@@ -285,12 +287,12 @@ class FisherViewBlocks:
             self._cache.move_to_end(view_id)
             return self._cache[view_id]
         try:
-            blocks = self.stored(self.compute(view_id))
+            blocks = self.compute(view_id, FACTOR_STORAGE)  # what the cache keeps, written directly
         except torch.cuda.OutOfMemoryError:
             if self.streaming or not self._cache:
                 raise
             self.use_streaming(f"out of device memory with {len(self._cache)} views cached")
-            blocks = self.stored(self.compute(view_id))
+            blocks = self.compute(view_id, FACTOR_STORAGE)  # what the cache keeps, written directly
         if view_id not in self._seen:
             self._seen.add(view_id)
             self.views_computed += 1

@@ -123,11 +123,11 @@ def test_out_of_memory_while_caching_falls_back_to_streaming(monkeypatch, caplog
     compute = oracle.blocks.compute
     failed = []
 
-    def compute_once_out_of_memory(view_id):
+    def compute_once_out_of_memory(view_id, *dtype):
         if len(oracle.blocks._cache) == 2 and not failed:  # the third view does not fit on the device
             failed.append(view_id)
             raise torch.cuda.OutOfMemoryError("CUDA out of memory (simulated)")
-        return compute(view_id)
+        return compute(view_id, *dtype)
 
     monkeypatch.setattr(oracle.blocks, "compute", compute_once_out_of_memory)
     ctx = SelectionContext([1, 2, 4, 5], oracle, torch.Generator().manual_seed(0), 0)

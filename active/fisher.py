@@ -26,8 +26,9 @@ train.py calls, with the kind the selector declares.
 candidates' information as `fisher_view_factors`: only the Gaussians the view sees (a non-zero attribute Gram), each
 block as the factor R_i = sigma^-1 J_proj,i^T C_i [P, A] (C_i C_i^T = G_i+, the PSD part of the attribute Gram, by a
 pivoted Cholesky of the equilibrated Gram in numba, made once per view; `active.logdet.gram_root_factors`), so
-H_v,i = R_i R_i^T and a gain or commit touches the visible blocks only. Factors are stored as float32 (`FACTOR_STORAGE`; arithmetic stays float64). Modes: "cached" keeps each
-candidate's factors for the stage (an oracle is then a log-det update); "streaming" keeps nothing and recomputes a
+H_v,i = R_i R_i^T and a gain or commit touches the visible blocks only. Factors are made lower trapezoidal (Householder
+LQ) and stored packed, 90 of 126 entries, as float32 (`FACTOR_STORAGE`; arithmetic stays float64). Modes: "cached"
+keeps each candidate's factors for the stage (an oracle is then a log-det update); "streaming" keeps nothing and recomputes a
 view's factors at every oracle (memory-lean). When the cache estimate (the training views' visible counts times the
 candidates) exceeds the memory budget, one view alone does not fit it, or the device runs out of memory while
 caching, cached mode falls back to streaming and says so once.
@@ -94,7 +95,8 @@ def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: to
     Jacobian is computed for the visible Gaussians only.
 
     Returns:
-        indices [n] of the Gaussians with a non-zero Gram, factors [n, P, A] in `dtype` (computed in float64).
+        indices [n] of the Gaussians with a non-zero Gram, factors [n, P, A] (lower trapezoidal, packed) in `dtype`
+        (computed in float64).
     """
     with torch.no_grad():
         for group in param_groups:  # the dense blocks of every Gaussian would carry a NaN parameter: refuse it too
@@ -103,8 +105,8 @@ def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: to
         check_finite(gram, "view", gaussians.num_gaussians)
         jac = _projection_jacobian(gaussians, camera, param_groups, settings.backend, indices)  # [n, A, P]
         check_finite(jac, "view", gaussians.num_gaussians)
-        factors = gram_root_factors(gram, jac, sigma, backend, dtype)  # R [n, P, A]
-    return ViewFactors(indices, factors, gaussians.num_gaussians)
+        packed = gram_root_factors(gram, jac, sigma, backend, dtype)  # R [n, m], lower trapezoidal [P, A] packed
+    return ViewFactors(indices, packed, jac.shape[2], jac.shape[1], gaussians.num_gaussians)
 
 
 def fisher_view_diagonals(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,

@@ -10,9 +10,11 @@ the whitened form: L is cached and updated only when a view is committed.
 
 A view enters as `ViewFactors`: only the Gaussians it sees (indices [n_v]; every other block of H_v is zero and
 adds exactly 0), each block as a factor H_v,i = R_i R_i^T, R_i [P, r] (the Fisher oracle's r = 9 attributes:
-R = J_proj^T G^1/2; dense [N, P, P] blocks are converted by `ViewFactors.from_blocks`, r = P). By Sylvester's
-identity logdet(I_P + W_i) = logdet(I_r + Y^T Y) with Y = L_i^-1 R_i, so one gain is a triangular solve and an
-r x r Cholesky per visible block (`active.logdet_kernels`, numba; `factor_gain_terms_torch` is its torch twin).
+R = J_proj^T G^1/2; dense [N, P, P] blocks are converted by `ViewFactors.from_blocks`, r = P), lower trapezoidal
+(R -> R Q, Q orthogonal, leaves R R^T unchanged) and packed: 90 of 126 entries stored (`active.trapezoid`).
+By Sylvester's identity logdet(I_P + W_i) = logdet(I_r + Y^T Y) with Y = L_i^-1 R_i, so one gain is a triangular
+solve and an r x r Cholesky per visible block (`active.logdet_kernels`, numba; `factor_gain_terms_torch` is its
+torch twin).
 
 Numerics (real blocks are nearly singular: the normalised quaternion leaves an exact null direction, eigenvalue
 ratios reach ~1e10, float32 accumulation leaves negative eigenvalues ~eps * |H|):
@@ -36,6 +38,7 @@ from typing import Callable, Union
 
 import torch
 
+from active import trapezoid
 from utils.errors import UserError
 
 LOGDET_BACKENDS = ("auto", "compiled", "torch")
@@ -77,38 +80,49 @@ def logdet_identity_plus(w: torch.Tensor) -> torch.Tensor:
 
 @dataclass(frozen=True)
 class ViewFactors:
-    """A view's Fisher information over the Gaussians it sees: H_v,i = R_b R_b^T for i = indices[b], 0 elsewhere.
+    """A view's Fisher information over the Gaussians it sees: H_v,i = R_b R_b^T for i = indices[b], 0 elsewhere, each
+    R_b [P, r] lower trapezoidal and packed row by row (`active.trapezoid`: 90 of 126 entries for P = 14, r = 9).
 
     Finite by construction (`__post_init__` raises the one-line error otherwise). Storage may be float32; every
     use computes in float64.
     """
 
     indices: torch.Tensor  # [n] int64, the visible Gaussians, ascending
-    factors: torch.Tensor  # [n, P, r] float32 or float64
+    packed: torch.Tensor  # [n, m] float32 or float64, m = trapezoid.packed_width(P, r)
+    num_params: int  # P
+    num_columns: int  # r
     num_gaussians: int  # N
 
     def __post_init__(self) -> None:
-        assert self.indices.dim() == 1 and self.factors.dim() == 3 and self.factors.shape[0] == self.indices.shape[0], \
-            f"ViewFactors needs indices [n] and factors [n, P, r], got {tuple(self.indices.shape)}, " \
-            f"{tuple(self.factors.shape)}"
-        check_finite(self.factors, "view", self.num_gaussians)
+        m = trapezoid.packed_width(self.num_params, self.num_columns)
+        assert self.indices.dim() == 1 and tuple(self.packed.shape) == (self.indices.shape[0], m), \
+            f"ViewFactors needs indices [n] and packed factors [n, {m}], got {tuple(self.indices.shape)}, " \
+            f"{tuple(self.packed.shape)}"
+        check_finite(self.packed, "view", self.num_gaussians)
 
-    @property
-    def num_params(self) -> int:
-        return self.factors.shape[1]
+    @classmethod
+    def from_factors(cls, indices: torch.Tensor, factors: torch.Tensor, num_gaussians: int) -> "ViewFactors":
+        """Any factors R [n, P, r] of the visible blocks (made lower trapezoidal by LQ, then packed; dtype kept)."""
+        check_finite(factors, "view", num_gaussians)
+        packed = trapezoid.pack(trapezoid.lower_trapezoid(factors)).to(factors.dtype)
+        return cls(indices, packed, factors.shape[1], factors.shape[2], num_gaussians)
 
     @property
     def nbytes(self) -> int:
-        """Bytes held (indices and factors)."""
-        return self.indices.numel() * self.indices.element_size() + self.factors.numel() * self.factors.element_size()
+        """Bytes held (indices and packed factors)."""
+        return self.indices.numel() * self.indices.element_size() + self.packed.numel() * self.packed.element_size()
 
     def stored_as(self, dtype: torch.dtype) -> "ViewFactors":
         """The same view with its factors stored in `dtype` (float32 halves the cache; arithmetic stays float64)."""
-        return ViewFactors(self.indices, self.factors.to(dtype), self.num_gaussians)
+        return ViewFactors(self.indices, self.packed.to(dtype), self.num_params, self.num_columns, self.num_gaussians)
+
+    def factors(self) -> torch.Tensor:
+        """The lower-trapezoidal factors R, float64. [n, P, r]"""
+        return trapezoid.unpack(self.packed.double(), self.num_params, self.num_columns)
 
     def dense(self) -> torch.Tensor:
         """The blocks R R^T scattered into [N, P, P] float64 (zero for the Gaussians the view does not see)."""
-        r = self.factors.double()
+        r = self.factors()
         out = r.new_zeros(self.num_gaussians, self.num_params, self.num_params)
         out[self.indices] = r @ r.transpose(-1, -2)
         return out
@@ -121,7 +135,7 @@ class ViewFactors:
         indices = torch.nonzero(h.flatten(1).abs().amax(dim=1) > 0).flatten() if h.shape[0] else \
             torch.zeros(0, dtype=torch.long, device=h.device)  # [n]
         evals, evecs = torch.linalg.eigh(h[indices])  # [n, P], [n, P, P]
-        return cls(indices, evecs * evals.clamp_min(0.0).sqrt()[:, None, :], h.shape[0])
+        return cls.from_factors(indices, evecs * evals.clamp_min(0.0).sqrt()[:, None, :], h.shape[0])
 
 
 ViewInput = Union[torch.Tensor, ViewFactors]  # dense blocks [N, P, P] or a view's factors
@@ -130,7 +144,7 @@ ViewInput = Union[torch.Tensor, ViewFactors]  # dense blocks [N, P, P] or a view
 def factor_gain_terms_torch(chol: torch.Tensor, view: ViewFactors) -> torch.Tensor:
     """Torch twin of `logdet_kernels.gain_terms`: max(logdet(I_r + Y^T Y), 0) with Y = L_i^-1 R per visible block.
     chol [N, P, P] float64 -> terms [n] float64"""
-    r = view.factors.double()  # [n, P, r]
+    r = view.factors()  # [n, P, r]
     y = torch.linalg.solve_triangular(chol[view.indices], r, upper=False)  # [n, P, r]
     g = torch.eye(r.shape[-1], dtype=r.dtype, device=r.device) + y.transpose(-1, -2) @ y  # [n, r, r]
     c = torch.linalg.cholesky(g)
@@ -140,7 +154,7 @@ def factor_gain_terms_torch(chol: torch.Tensor, view: ViewFactors) -> torch.Tens
 def factor_commit_torch(chol: torch.Tensor, view: ViewFactors) -> torch.Tensor:
     """Torch twin of `logdet_kernels.commit`: L_i <- L_i C, C C^T = I_P + Y Y^T, for the visible blocks whose term is
     > 0, in place on chol [N, P, P]; returns the terms [n] (0 where skipped)."""
-    r = view.factors.double()  # [n, P, r]
+    r = view.factors()  # [n, P, r]
     l = chol[view.indices]  # [n, P, P]
     y = torch.linalg.solve_triangular(l, r, upper=False)  # [n, P, r]
     c = torch.linalg.cholesky(torch.eye(r.shape[1], dtype=r.dtype, device=r.device) + y @ y.transpose(-1, -2))
@@ -164,15 +178,16 @@ def gram_root_factors_torch(gram: torch.Tensor, jac: torch.Tensor, sigma: float)
 
 def gram_root_factors(gram: torch.Tensor, jac: torch.Tensor, sigma: float, backend: str = "auto",
                       dtype: torch.dtype = torch.float64) -> torch.Tensor:
-    """The factors R_b [P, A] with R_b R_b^T = sigma^-2 J_b^T G_b+ J_b (G_b+: the PSD part of the attribute Gram): the
-    numba pivoted-Cholesky kernel on the CPU, else (or with backend="torch") the eigen-decomposition twin. Computed in
-    float64 and returned in `dtype` (float32: what a cache stores, written directly, no float64 copy).
-    gram [n, A, A], jac [n, A, P] float64 -> R [n, P, A]"""
-    if not _compiled(backend, gram) or gram.shape[0] == 0:
-        return gram_root_factors_torch(gram, jac, sigma).to(dtype)
-    from active import logdet_kernels
+    """The factors R_b [P, A] with R_b R_b^T = sigma^-2 J_b^T G_b+ J_b (G_b+: the PSD part of the attribute Gram), lower
+    trapezoidal and packed (`active.trapezoid`): the numba pivoted-Cholesky + Householder-LQ kernel on the CPU, else
+    (or with backend="torch") the eigen-decomposition twin made trapezoidal by QR. Computed in float64 and returned in
+    `dtype` (float32: what a cache stores, written directly, no float64 copy).
+    gram [n, A, A], jac [n, A, P] float64 -> packed R [n, trapezoid.packed_width(P, A)]"""
     n, a, p = jac.shape
-    out = torch.empty(n, p, a, dtype=dtype)
+    if not _compiled(backend, gram) or n == 0:
+        return trapezoid.pack(trapezoid.lower_trapezoid(gram_root_factors_torch(gram, jac, sigma))).to(dtype)
+    from active import logdet_kernels
+    out = torch.empty(n, trapezoid.packed_width(p, a), dtype=dtype)
     logdet_kernels.gram_root_factors(gram.double().contiguous().numpy(), jac.double().contiguous().numpy(),
                                      1.0 / sigma, _kernel_threads(n), out.numpy())
     return out
@@ -202,9 +217,10 @@ def _kernel_threads(num_blocks: int) -> int:
 
 
 def _kernel_args(chol: torch.Tensor, view: ViewFactors) -> tuple:
-    """numpy views of (L, indices, factors) and the thread slice count for `logdet_kernels`."""
+    """numpy views of (L, indices, packed factors), their column count r and the thread slice count for
+    `logdet_kernels`."""
     threads = _kernel_threads(view.indices.shape[0])
-    return chol.numpy(), view.indices.contiguous().numpy(), view.factors.contiguous().numpy(), threads
+    return chol.numpy(), view.indices.contiguous().numpy(), view.packed.contiguous().numpy(), view.num_columns, threads
 
 
 def ridged_prior(prior_blocks: torch.Tensor, delta_rel: float, delta_abs: float) -> tuple[torch.Tensor, torch.Tensor]:

@@ -65,7 +65,7 @@ def synthetic(n: int, visible: float, peak: float, repeats: int) -> dict:
     j = torch.randn(n, 12, p, generator=g, dtype=torch.float64)
     prior = j.transpose(1, 2) @ j  # [N, P, P]
     seen = torch.sort(torch.randperm(n, generator=g)[:int(round(visible * n))]).values
-    view = ViewFactors(seen, torch.randn(len(seen), p, r, generator=g, dtype=torch.float64), n)
+    view = ViewFactors.from_factors(seen, torch.randn(len(seen), p, r, generator=g, dtype=torch.float64), n)
     new, old = BlockInformation(prior), DenseBlockInformation(prior)
     new.gain(view)  # compile
     dense = view.dense()
@@ -147,7 +147,8 @@ def per_candidate(name: str, gaussians: GaussianModel, cams: list[Camera], bg: t
             views.append(view)
         t_fisher = statistics.median(t_fisher)
         new.gain(views[0])  # compile (numba caches on disk) the gain and the commit for this factor dtype
-        warm = ViewFactors(torch.zeros(1, dtype=torch.long), views[0].factors[:1], 1)
+        warm = ViewFactors(torch.zeros(1, dtype=torch.long), views[0].packed[:1], views[0].num_params,
+                           views[0].num_columns, 1)
         BlockInformation(warm_prior).add(warm)
         t_gain = statistics.median(timed(lambda v=v: new.gain(v), 3)[0] for v in views)
         mean_bytes = sum(v.nbytes for v in views) / len(views)

@@ -119,8 +119,8 @@ def test_cached_and_streaming_equal_greedy_on_bruteforce_blocks(backend):
 def test_prior_views_are_float64_and_candidates_are_stored_float32(backend):
     # The stage prior sums the training views' factors as computed (float64); the cache keeps FACTOR_STORAGE.
     oracle = FisherOracle.build(tiny_model(seed=2), cameras(), [0, 3], BG, settings(backend), mode="cached")
-    assert oracle.blocks.compute(0).factors.dtype == torch.float64
-    assert oracle.blocks(1).factors.dtype == torch.float32
+    assert oracle.blocks.compute(0).packed.dtype == torch.float64
+    assert oracle.blocks(1).packed.dtype == torch.float32
 
 
 def test_out_of_memory_while_caching_falls_back_to_streaming(monkeypatch, caplog, backend):

@@ -6,9 +6,11 @@ import torch
 
 from active.fisher import fisher_view_blocks, fisher_view_factors
 from active.logdet import gram_root_factors, gram_root_factors_torch
+from active.trapezoid import packed_width, unpack
 from tests.test_view_factors import BG, SETTINGS, cameras, model
 
 A, P = 9, 14
+M = packed_width(P, A)  # 90 packed entries of a lower-trapezoidal [P, A] factor
 
 
 def random_grams(n: int, rank: int, seed: int, orders: float = 8.0) -> tuple[torch.Tensor, torch.Tensor]:
@@ -34,10 +36,11 @@ def test_compiled_root_equals_torch_twin_and_the_blocks(rank):
     expected = jac.transpose(1, 2) @ gram @ jac / 0.25  # sigma = 0.5: H = sigma^-2 J^T G J [n, P, P]
     compiled = gram_root_factors(gram, jac, 0.5, backend="compiled")
     twin = gram_root_factors(gram, jac, 0.5, backend="torch")
-    assert compiled.shape == twin.shape == (200, P, A)
+    assert compiled.shape == twin.shape == (200, M)
+    compiled, twin = unpack(compiled, P, A), unpack(twin, P, A)
     assert relative_error(compiled, expected) < 1e-11
     assert relative_error(twin, expected) < 1e-9
-    # columns past the rank are exactly zero in the pivoted-Cholesky root
+    # columns past the rank are exactly zero in the pivoted-Cholesky root, and stay so through the LQ
     assert torch.count_nonzero(compiled[:, :, rank:]) == 0
 
 
@@ -58,14 +61,15 @@ def test_roundoff_negative_and_zero_attributes_are_dropped_not_amplified():
     gram[:10, :, 4] = 0.0
     expected = jac.transpose(1, 2) @ gram @ jac
     for backend in ("compiled", "torch"):
-        r = gram_root_factors(gram, jac, 1.0, backend=backend)
+        r = unpack(gram_root_factors(gram, jac, 1.0, backend=backend), P, A)
         assert torch.isfinite(r).all()
         assert relative_error(r, expected) < 1e-9
 
 
 def test_empty_view_has_no_factors():
     gram, jac = torch.zeros(0, A, A, dtype=torch.float64), torch.zeros(0, A, P, dtype=torch.float64)
-    assert gram_root_factors(gram, jac, 1.0, backend="compiled").shape == (0, P, A)
+    for backend in ("compiled", "torch"):
+        assert gram_root_factors(gram, jac, 1.0, backend=backend).shape == (0, M)
 
 
 def test_real_view_factors_equal_on_both_backends():

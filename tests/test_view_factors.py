@@ -51,7 +51,8 @@ def test_factors_equal_dense_blocks_on_the_visible_gaussians():
         view = fisher_view_factors(gaussians, cam, BG, SETTINGS, sigma=0.5)
         seen = torch.nonzero(blocks.abs().flatten(1).amax(1) > 0).flatten()
         assert 0 < len(seen) < gaussians.num_gaussians  # the view sees part of the model
-        assert torch.equal(view.indices, seen) and view.factors.shape == (len(seen), 14, 9)
+        assert torch.equal(view.indices, seen) and view.packed.shape == (len(seen), 90)
+        assert (view.num_params, view.num_columns) == (14, 9)
         scale = float(blocks.abs().max())
         torch.testing.assert_close(view.dense(), blocks, rtol=1e-5, atol=1e-6 * scale)
         # ^ J_proj is float32 arithmetic (a float32 model), evaluated on the visible subset: batched float32 ops may
@@ -143,7 +144,7 @@ def test_cached_factors_are_bounded_by_the_budget_in_bytes():
     gaussians, cams = model(), cameras()
     oracle = FisherOracle.build(gaussians, cams, [0, 4], BG, SETTINGS, mode="cached")
     sizes = {v: oracle.blocks(v).nbytes for v in (1, 2, 3)}
-    assert all(oracle.blocks(v).factors.dtype == torch.float32 for v in (1, 2, 3))
+    assert all(oracle.blocks(v).packed.dtype == torch.float32 for v in (1, 2, 3))
     assert oracle.blocks._cached_bytes == sum(sizes.values())
     size5 = FisherOracle.build(gaussians, cams, [0, 4], BG, SETTINGS).blocks(5).nbytes
     oracle.blocks.cache_bytes = sizes[3] + size5  # room for the two most recent views only

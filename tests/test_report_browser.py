@@ -33,6 +33,17 @@ def load(driver, path, plot_id: str) -> None:
     time.sleep(0.5)  # WebGL frame
 
 
+def wait_until_clickable(driver, image) -> None:
+    """Scroll a lazily loaded image into view and wait (up to 10 s) until it has loaded and has a size: clicking it
+    before then fails with "element not interactable" (seen once in CI)."""
+    driver.execute_script("arguments[0].scrollIntoView({block: 'center'});", image)
+    deadline = time.time() + 10
+    while not driver.execute_script("var e = arguments[0], r = e.getBoundingClientRect();"
+                                    "return e.complete && e.naturalWidth > 0 && r.width > 0 && r.height > 0;", image):
+        assert time.time() < deadline, "the render never loaded"
+        time.sleep(0.1)
+
+
 def check_page(driver, plot_id: str) -> None:
     assert console_errors(driver) == []
     assert external_requests(driver) == []
@@ -45,7 +56,9 @@ def test_run_report_in_browser(browser, active_model, tmp_path):
     check_page(browser, "scene3d")
     assert browser.execute_script(COUNT_MARKERS) == len(json.loads((active_model / "cameras.json").read_text()))
     assert browser.execute_script("return document.getElementById('psnr_views')._fullLayout !== undefined")
-    browser.find_elements("css selector", "img.zoom")[1].click()  # enlarge a render
+    render = browser.find_elements("css selector", "img.zoom")[1]
+    wait_until_clickable(browser, render)
+    render.click()  # enlarge a render
     assert browser.execute_script("return document.getElementById('lightbox').style.display") == "flex"
 
 

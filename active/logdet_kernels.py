@@ -30,16 +30,15 @@ def _row_start(k, r):
 
 @njit(inline="always", cache=True)
 def _whiten(chol, i, packed, b, r, y):
-    """y [P, r] <- L_i^-1 R_b by forward substitution, R_b lower trapezoidal and packed (unpacked with its zeros: the
-    loops keep the full width r, which vectorises better than the trapezoid's shorter rows)."""
+    """y [P, r] <- L_i^-1 R_b by forward substitution, R_b lower trapezoidal and packed. y must come zero-filled
+    (np.zeros, once per thread): its entries above the trapezoid are never written and stay 0, so the loops keep the
+    full width r, which vectorises better than the trapezoid's shorter rows."""
     p = chol.shape[1]
     for k in range(p):
         inv = 1.0 / chol[i, k, k]
         width, start = min(k + 1, r), _row_start(k, r)
-        for c in range(width):
+        for c in range(width):  # y[k, width:] is 0 from the caller's np.zeros and stays 0: y[j, width:] = 0, j < k
             y[k, c] = packed[b, start + c]
-        for c in range(width, r):
-            y[k, c] = 0.0
         for j in range(k):
             ljk = chol[i, k, j]
             for c in range(r):
@@ -88,7 +87,7 @@ def gain_terms(chol, indices, packed, r, num_slices):
     terms = np.zeros(n)
     per = (n + num_slices - 1) // num_slices
     for s in prange(num_slices):
-        y = np.empty((p, r))
+        y = np.zeros((p, r))  # entries above the trapezoid stay 0 (`_whiten`)
         g = np.empty((r, r))
         for b in range(s * per, min(n, (s + 1) * per)):
             _whiten(chol, indices[b], packed, b, r, y)
@@ -112,7 +111,7 @@ def commit(chol, indices, packed, r, num_slices):
     terms = np.zeros(n)
     per = (n + num_slices - 1) // num_slices
     for s in prange(num_slices):
-        y = np.empty((p, r))
+        y = np.zeros((p, r))  # entries above the trapezoid stay 0 (`_whiten`)
         m = np.empty((p, p))
         out = np.empty((p, p))
         for b in range(s * per, min(n, (s + 1) * per)):

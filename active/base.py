@@ -109,6 +109,22 @@ def check_k(k: int) -> None:
         raise UserError(f"--views_per_step (K) must be positive, got {k}")
 
 
+GAIN_WEIGHTS = ("none", "opacity")  # --gain_weight: how the log-det selectors weigh each Gaussian's term
+
+
+def check_gain_weight(gain_weight: str) -> str:
+    """--gain_weight must name one of `GAIN_WEIGHTS`."""
+    if gain_weight not in GAIN_WEIGHTS:
+        raise UserError(f"--gain_weight must be one of {', '.join(GAIN_WEIGHTS)}, got {gain_weight!r}")
+    return gain_weight
+
+
+def logdet_oracle_kind(gain_weight: str) -> str:
+    """The oracle kind of a log-det selector: "logdet", or "logdet_opacity" (each Gaussian's log-det term weighted
+    by its opacity, `active.fisher.build_oracle`)."""
+    return "logdet" if check_gain_weight(gain_weight) == "none" else f"logdet_{gain_weight}"
+
+
 def check_eps(eps: float) -> float:
     """The accuracy parameter of the stochastic selectors must lie in (0, 1)."""
     if not 0.0 < eps < 1.0:

@@ -43,6 +43,7 @@ from typing import Callable
 
 import torch
 
+from active.cover_oracle import CoverageOracle
 from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite, gram_root_factors
 from gaussian_renderer import (RasterSettings, attribute_gram, project_and_shade, projection_jacobian,
                                seen_attribute_gram)
@@ -57,6 +58,7 @@ FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian f
     "default": ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
     "full_sh": ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest"),
 }
+ORACLE_KINDS = ("logdet", "logdet_opacity", "diagonal", "diagonal_reference", "coverage")  # build_oracle's kinds
 FACTOR_STORAGE = torch.float32  # dtype of cached view factors (the float32 accuracy test: tests/test_view_factors.py)
 
 
@@ -334,19 +336,24 @@ class _ViewStatistics:
 class FisherOracle(_ViewStatistics, BlockGainOracle):
     """The counted Fisher gain oracle of one acquisition step: prior of the training views, blocks of the others."""
 
-    def __init__(self, information: BlockInformation, view_blocks: FisherViewBlocks):
-        super().__init__(information, view_blocks)
+    def __init__(self, information: BlockInformation, view_blocks: FisherViewBlocks,
+                 weights: torch.Tensor | None = None):
+        super().__init__(information, view_blocks, weights)
         self.blocks = view_blocks
 
     @classmethod
     def build(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int], background: torch.Tensor,
               settings: RasterSettings, *, sigma: float = 1.0, delta_rel: float = 1e-6, delta_abs: float = 1e-8,
-              param_groups: str = "default", mode: str = "cached", cache_mb: int = 0) -> "FisherOracle":
-        """Compute the prior from `train_views` and return an oracle over the other views of `cameras`."""
+              param_groups: str = "default", mode: str = "cached", cache_mb: int = 0,
+              gain_weight: str = "none") -> "FisherOracle":
+        """Compute the prior from `train_views` and return an oracle over the other views of `cameras`; with
+        `gain_weight="opacity"` each Gaussian's log-det term is weighted by its opacity
+        (`active.base.GAIN_WEIGHTS`)."""
         source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, FISHER_PARAM_GROUPS[param_groups],
                                   mode == "streaming", _cache_budget(cache_mb))
         prior = _prior(source, train_views, len(cameras))
-        return cls(BlockInformation(prior, delta_rel=delta_rel, delta_abs=delta_abs), source)
+        weights = gaussians.opacities.detach() if gain_weight == "opacity" else None
+        return cls(BlockInformation(prior, delta_rel=delta_rel, delta_abs=delta_abs), source, weights)
 
 
 class DiagonalGainOracle:
@@ -397,19 +404,22 @@ class DiagonalFisherOracle(_ViewStatistics, DiagonalGainOracle):
 def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
                  background: torch.Tensor, settings: RasterSettings, *, sigma: float = 1.0, delta_rel: float = 1e-6,
                  delta_abs: float = 1e-8, param_groups: str = "default", mode: str = "cached",
-                 cache_mb: int = 0) -> FisherOracle | DiagonalFisherOracle:
+                 cache_mb: int = 0) -> FisherOracle | DiagonalFisherOracle | CoverageOracle:
     """The oracle of `kind` (a selector's `oracle_kind`): "logdet" -> `FisherOracle` (ridge and `param_groups`
-    apply), "diagonal" -> `DiagonalFisherOracle` (every raw parameter group, no ridge), "diagonal_reference" -> the
-    same over FisherRF's code's diagonal (`fisher_view_diagonals_reference`)."""
-    if kind == "logdet":
+    apply), "logdet_opacity" -> the same with each Gaussian's term weighted by its opacity, "diagonal" ->
+    `DiagonalFisherOracle` (every raw parameter group, no ridge), "diagonal_reference" -> the same over FisherRF's
+    code's diagonal (`fisher_view_diagonals_reference`), "coverage" -> COVER's geometric `CoverageOracle` (no Fisher
+    pass; the Fisher options do not apply)."""
+    if kind in ("logdet", "logdet_opacity"):
         return FisherOracle.build(gaussians, cameras, train_views, background, settings, sigma=sigma,
                                   delta_rel=delta_rel, delta_abs=delta_abs, param_groups=param_groups, mode=mode,
-                                  cache_mb=cache_mb)
+                                  cache_mb=cache_mb, gain_weight="opacity" if kind == "logdet_opacity" else "none")
+    if kind == "coverage":
+        return CoverageOracle(gaussians.means, gaussians.opacities, cameras, train_views)
     if kind in ("diagonal", "diagonal_reference"):
         return DiagonalFisherOracle.build(gaussians, cameras, train_views, background, settings, sigma=sigma,
                                           mode=mode, cache_mb=cache_mb, reference=kind == "diagonal_reference")
-    raise ValueError(f"unknown oracle kind {kind!r} (a selector's oracle_kind is 'logdet', 'diagonal' or "
-                     "'diagonal_reference')")
+    raise ValueError(f"unknown oracle kind {kind!r} (a selector's oracle_kind is one of {', '.join(ORACLE_KINDS)})")
 
 
 def _cache_budget(cache_mb: int) -> int:

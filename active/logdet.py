@@ -378,11 +378,17 @@ class BlockGainOracle:
     It remembers the factors of the best view evaluated since the last commit: every selector commits the best gain
     of its pick, so a commit costs no second `view_blocks` call (in streaming mode, no Fisher recompute).
     Memory: one view's factors.
+
+    With `weights` w [N] (>= 0) a gain is the weighted sum sum_i w_i (logdet(A_i + H_v,i) - logdet(A_i)): a
+    non-negative combination of submodular terms, so still monotone submodular (lazy greedy stays exact); commits
+    are unchanged (A grows by H_v whatever the weights).
     """
 
-    def __init__(self, information: BlockInformation, view_blocks: Callable[[int], ViewInput]):
+    def __init__(self, information: BlockInformation, view_blocks: Callable[[int], ViewInput],
+                 weights: torch.Tensor | None = None):
         self.information = information
         self.view_blocks = view_blocks
+        self.weights = None if weights is None else weights.detach().double().to(information.chol.device)  # [N]
         self.evaluated = 0  # oracle evaluations since construction or `reset_counts`
         self._best: tuple[int, float, ViewFactors] | None = None  # (view, gain, factors) since the last commit
 
@@ -390,7 +396,8 @@ class BlockGainOracle:
         """rho(v | S): one oracle evaluation."""
         self.evaluated += 1
         view = self.information.view(self.view_blocks(view_id))
-        gain = float(self.information.gain_terms(view).sum())
+        terms = self.information.gain_terms(view)  # [n] over the Gaussians the view sees
+        gain = float((terms if self.weights is None else terms * self.weights[view.indices]).sum())
         if self._best is None or gain > self._best[1]:
             self._best = (view_id, gain, view)
         return gain

@@ -55,6 +55,19 @@ def make_seed_dataset(data: Path, out: Path, num_seed: int) -> tuple[list[int], 
     return seeds, candidates
 
 
+def method_args(spec: str) -> list[str]:
+    """recommend.py's selector flags for a method spec NAME[+OPTION=VALUE...], e.g. "pop_gs+gain_weight=opacity"
+    -> ["--method", "pop_gs", "--gain_weight", "opacity"]; the spec itself labels the results."""
+    name, *options = spec.split("+")
+    flags = ["--method", name]
+    for option in options:
+        key, sep, value = option.partition("=")
+        if not sep or not key or not value:
+            raise UserError(f"method {spec!r}: write selector options as NAME+OPTION=VALUE (e.g. pop_gs+gain_weight=opacity)")
+        flags += [f"--{key}", value]
+    return flags
+
+
 def run(cmd: list[str], threads: int, log: Path) -> float:
     """Run one CLI of the project with `threads` threads; its output goes to `log`. Returns the wall seconds."""
     env = {**os.environ, **{v: str(threads) for v in THREAD_VARS}}

@@ -18,7 +18,7 @@ import argparse
 import json
 from pathlib import Path
 
-from experiments.recommend_then_train import make_seed_dataset, run, summary_table
+from experiments.recommend_then_train import make_seed_dataset, method_args, run, summary_table
 from utils import model_dir
 from utils.checkpoint import RunDirectory
 from utils.errors import UserError, run_cli
@@ -30,7 +30,8 @@ def main() -> None:
     p.add_argument("--data", default="../shared/data/lego", help="Blender dataset (transforms_train/test.json)")
     p.add_argument("-o", "--output", default="output/recommend_then_train")
     p.add_argument("--methods", nargs="+", default=["lite_gs", "coverage", "random", "none"],
-                   help="recommend.py selectors, and 'none' (no new views)")
+                   help="recommend.py selectors, NAME or NAME+OPTION=VALUE (e.g. pop_gs+gain_weight=opacity), and "
+                        "'none' (no new views)")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--num_seed_views", type=int, default=5)
     p.add_argument("-k", type=int, default=4)
@@ -70,7 +71,7 @@ def main() -> None:
             if method != "none" and "picks" not in row:
                 rec_dir = out / "recommend" / f"{method}_seed{seed}"
                 secs = run(["recommend.py", "-m", str(base), "--candidates", str(out / "data" / "candidates.json"),
-                            "-k", str(args.k), "--method", method, "--seed", str(seed), "-o", str(rec_dir),
+                            "-k", str(args.k), *method_args(method), "--seed", str(seed), "-o", str(rec_dir),
                             "--quiet", "--no_previews"], args.threads, out / "logs" / f"recommend_{method}_{seed}.log")
                 rec = json.loads((rec_dir / "recommendations.json").read_text())
                 row = {"picks": [candidates[pick["candidate"]] for pick in rec["picks"]],

@@ -13,9 +13,10 @@ from dataclasses import dataclass, field
 
 import torch
 
-from active.base import Selection, SelectionContext, Selector, check_eps, check_k
+from active.base import Selection, SelectionContext, Selector, check_eps, check_gain_weight, check_k, logdet_oracle_kind
 from active.registry import register_selector
 from active.selectors.lazy_greedy import lazy_greedy_select
+from active.selectors.pop_gs import GAIN_WEIGHT_HELP
 
 
 def subset_size(remaining: int, k: int, eps: float) -> int:
@@ -27,9 +28,11 @@ def subset_size(remaining: int, k: int, eps: float) -> int:
 class LiteGSConfig:
     eps: float = field(default=0.1, metadata={"help": "accuracy parameter in (0, 1): guarantee 1 - exp(-(1 - eps)), "
                                                       "about M ln(1/eps) oracles per step"})
+    gain_weight: str = field(default="none", metadata={"help": GAIN_WEIGHT_HELP})
 
     def __post_init__(self) -> None:
         check_eps(self.eps)
+        check_gain_weight(self.gain_weight)
 
 
 @register_selector("lite_gs", config=LiteGSConfig)
@@ -38,6 +41,7 @@ class LiteGSSelector(Selector):
 
     def __init__(self, config: LiteGSConfig = LiteGSConfig()):
         self.config = config
+        self.oracle_kind = logdet_oracle_kind(config.gain_weight)
 
     def conservative_count(self, m: int, k: int) -> int:
         k = min(k, m)

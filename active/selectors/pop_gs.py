@@ -1,34 +1,57 @@
 """`pop_gs`: exhaustive greedy D-optimal selection (POP-GS): every remaining candidate is scored at every pick."""
 from __future__ import annotations
 
-from active.base import Selection, SelectionContext, Selector, check_k
+from dataclasses import dataclass, field
+
+from active.base import (GAIN_WEIGHTS, GainOracle, Selection, SelectionContext, Selector, check_gain_weight, check_k,
+                         logdet_oracle_kind)
 from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
 
+GAIN_WEIGHT_HELP = (f"log-det selectors: weight of each Gaussian's term, one of {', '.join(GAIN_WEIGHTS)} ('opacity': "
+                    "by its opacity, so Gaussians that barely change a pixel count little)")
 
-@register_selector("pop_gs")
+
+def exhaustive_greedy(candidate_ids: list[int], k: int, oracle: GainOracle) -> Selection:
+    """Plain greedy: M - j oracles at pick j, ties to the lowest id; each pick committed to `oracle`."""
+    remaining = sorted(candidate_ids)
+    ids, gains, calls = [], [], 0
+    for _ in range(min(k, len(remaining))):
+        best, best_gain = remaining[0], float("-inf")
+        for view in remaining:  # ascending ids and a strict '>': ties go to the lowest id
+            gain = oracle.gain(view)
+            calls += 1
+            if gain > best_gain:
+                best, best_gain = view, gain
+        oracle.commit(best)
+        remaining.remove(best)
+        ids.append(best)
+        gains.append(best_gain)
+    return Selection(ids, gains, calls)
+
+
+@dataclass(frozen=True)
+class PopGSConfig:
+    gain_weight: str = field(default="none", metadata={"help": GAIN_WEIGHT_HELP})
+
+    def __post_init__(self) -> None:
+        check_gain_weight(self.gain_weight)
+
+
+@register_selector("pop_gs", config=PopGSConfig)
 class PopGSSelector(Selector):
     """Greedy maximisation of the log-det information gain: M - j oracles at pick j, ties to the lowest id.
 
     Counts: conservative = evaluated = sum_{j < min(K, M)} (M - j).
     """
 
+    def __init__(self, config: PopGSConfig = PopGSConfig()):
+        self.config = config
+        self.oracle_kind = logdet_oracle_kind(config.gain_weight)
+
     def conservative_count(self, m: int, k: int) -> int:
         return exhaustive_count(m, k)
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         check_k(k)
-        remaining = sorted(ctx.candidate_ids)
-        ids, gains, calls = [], [], 0
-        for _ in range(min(k, len(remaining))):
-            best, best_gain = remaining[0], float("-inf")
-            for view in remaining:  # ascending ids and a strict '>': ties go to the lowest id
-                gain = ctx.oracle.gain(view)
-                calls += 1
-                if gain > best_gain:
-                    best, best_gain = view, gain
-            ctx.oracle.commit(best)
-            remaining.remove(best)
-            ids.append(best)
-            gains.append(best_gain)
-        return Selection(ids, gains, calls)
+        return exhaustive_greedy(ctx.candidate_ids, k, ctx.oracle)

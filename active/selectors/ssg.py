@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import torch
 
-from active.base import Selection, SelectionContext, Selector, check_k
+from active.base import Selection, SelectionContext, Selector, check_k, logdet_oracle_kind
 from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
 from active.selectors.lazy_greedy import lazy_greedy_select
@@ -20,12 +20,13 @@ def ssg_subset_size(m: int, k: int, eps: float) -> int:
     return min(m, max(k, subset_size(m, k, eps)))
 
 
-@register_selector("ssg", config=LiteGSConfig)  # the same option, eps
+@register_selector("ssg", config=LiteGSConfig)  # the same options, eps and gain_weight
 class SSGSelector(Selector):
     """Lazy greedy over one random subset drawn once per stage."""
 
     def __init__(self, config: LiteGSConfig = LiteGSConfig()):
         self.config = config
+        self.oracle_kind = logdet_oracle_kind(config.gain_weight)
 
     def conservative_count(self, m: int, k: int) -> int:
         k = min(k, m)

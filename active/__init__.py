@@ -6,7 +6,7 @@ Public API: `Selector` (subclass it), `SelectionContext` (what `select` receives
 """
 from active.base import GainOracle, Selection, SelectionContext, Selector
 from active.registry import build_selector, build_selector_from, list_selectors, register_selector, selector_options
-from active.selectors import coverage, fisherrf, lite_gs, pop_gs, random, ssg  # noqa: F401  (registers the selectors)
+from active.selectors import cover, coverage, fisherrf, lite_gs, pop_gs, random, ssg  # noqa: F401  (registers the selectors)
 
 __all__ = ["GainOracle", "Selection", "SelectionContext", "Selector", "build_selector", "build_selector_from",
            "list_selectors", "register_selector", "selector_options"]

@@ -158,9 +158,13 @@ def test_registry_refuses_duplicates_unknown_names_and_options():
     with pytest.raises(UserError, match="eps"):
         build_selector("ssg", eps=0.0)
     with pytest.raises(UserError, match="valid options: none"):
+        build_selector("random", eps=0.1)
+    with pytest.raises(UserError, match="valid options: gain_weight"):
         build_selector("pop_gs", eps=0.1)
-    with pytest.raises(UserError, match="valid options: eps"):
+    with pytest.raises(UserError, match="valid options: eps, gain_weight"):
         build_selector("lite_gs", epsilon=0.1)
+    with pytest.raises(UserError, match="--gain_weight must be one of none, opacity"):
+        build_selector("pop_gs", gain_weight="pixels")
     assert build_selector("lite_gs", eps=0.3).config.eps == 0.3
     try:
         @register_selector("_test_dummy")

@@ -1,7 +1,7 @@
 """One acquisition step as a library call: build the selector's oracle over a pool of cameras, run the selector.
 
 `select_views` is the single place where a `SelectionContext` is assembled; `train.py`'s acquisition stage and
-`active.recommend` (recommend.py) both call it, so the same model, prior, candidates and seed give the same picks
+`recommender.pipeline` (recommend.py) both call it, so the same model, prior, candidates and seed give the same picks
 from either entry point. Candidate cameras need a pose, intrinsics and a size only: no image is read.
 """
 from __future__ import annotations

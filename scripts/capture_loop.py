@@ -1,7 +1,7 @@
 """A closed capture loop on the built-in scene, the one scene that can be photographed from any pose.
 
 Start from 3 views; each round trains a model on the views captured so far (train.py, from scratch), recommends K
-of N generated hemisphere poses (active.recommend, no images), "captures" them by rendering the built-in ground
+of N generated hemisphere poses (recommender, no images), "captures" them by rendering the built-in ground
 truth there, and repeats until the view budget. Test PSNR (the built-in test split) is recorded after every
 training, so each method gives a PSNR-vs-views curve.
 
@@ -24,8 +24,8 @@ from pathlib import Path
 import torch
 
 from active import build_selector
-from active.recommend import candidate_cameras, load_model, make_pool, recommend
-from active.recommend_outputs import write_outputs
+from recommender.outputs import write_outputs
+from recommender.pipeline import candidate_cameras, load_model, make_pool, recommend
 from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions, make_builtin_scene, render_rgba, scene_gaussians
 from scene.cameras import look_at
 from scene.frames import GL_TO_CV

@@ -1,4 +1,4 @@
-"""recommend.py / active.recommend: same picks as train.py, foreign PLYs, pose files, generated poses, bad input."""
+"""recommend.py / recommender: same picks as train.py, foreign PLYs, pose files, generated poses, bad input."""
 from __future__ import annotations
 
 import json
@@ -11,8 +11,8 @@ import torch
 from plyfile import PlyData, PlyElement
 
 from active import build_selector
-from active.candidates import generate
-from active.recommend import load_model, make_pool, recommend
+from recommender.candidates import generate
+from recommender.pipeline import load_model, make_pool, recommend
 from scene.cameras import Camera, look_at
 from scene.pose_files import read_pose_file
 from tests.conftest import run_cli

@@ -7,7 +7,7 @@
     write_outputs(rec, model, "output/lego/next")                      # recommendations.json, transforms.json, ...
 
 The prior H0 is the Fisher information of the captured views (a model directory's recorded training views; for a
-bare PLY the `captured` cameras). The selection itself is `active.acquisition.select_views`, the function train.py's
+bare PLY the `captured` cameras). The selection itself is `active.acquisition.run_selection`, the function train.py's
 acquisition stage calls: the same model, prior, candidates and seed give the same picks from either entry point.
 Candidates that see no Gaussian are left out of the selection (gain 0) and come only after every visible one.
 """
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import torch
 
-from active.acquisition import Acquisition, FisherSettings, select_views
+from active.acquisition import Acquisition, FisherSettings, run_selection
 from active.base import Selector
 from arguments import ModelConfig, PipelineConfig
 from gaussian_renderer import RasterSettings, project_gaussians
@@ -197,9 +197,9 @@ def recommend(model: LoadedModel, pool: Pool, selector: Selector, k: int, *, see
                      "gain 0, never picked before a visible one")
     picks, gains, step = [], [], None
     if seen:
-        step = select_views(selector, model.gaussians, pool.cameras, pool.train_ids, seen, min(k_taken, len(seen)),
-                            model.background, model.settings, seed=seed, stage=0, fisher=model.fisher,
-                            progress=progress)
+        step = run_selection(selector, model.gaussians, pool.cameras, pool.train_ids, seen, min(k_taken, len(seen)),
+                             model.background, model.settings, seed=seed, stage=0, fisher=model.fisher,
+                             progress=progress)
         picks, gains = list(step.selection.ids), list(step.selection.gains)
     for v in unseen[:k_taken - len(picks)]:
         picks.append(v)

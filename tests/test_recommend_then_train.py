@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from experiments.recommend_then_train import make_seed_dataset
+from experiments.recommend_train_loop import make_seed_dataset
 from tests.conftest import ROOT, run_cli
 
 SCRIPT = ROOT / "scripts" / "recommend_then_train.py"

@@ -32,7 +32,7 @@ from active.logdet import BlockInformation
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
-from utils.errors import UserError, parse_distinct_choices
+from utils.errors import parse_distinct_choices
 from utils.model_dir import UNCERTAINTY_KINDS
 
 

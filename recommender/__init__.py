@@ -1,4 +1,4 @@
-"""Where to capture next: the recommender application of `active` (CLI recommend.py, docs/recommend.md).
+"""The recommender application of `active`: where to capture next (CLI recommend.py, docs/recommend.md).
 
 For a trained model (a train.py model directory, read through `scene.trained.load_trained`, or a bare 3DGS PLY with
 the views already taken), rank candidate camera poses that have no image yet:

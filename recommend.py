@@ -20,10 +20,10 @@ from pathlib import Path
 import torch
 
 from active import build_selector_from, list_selectors
-from active.recommend import candidate_cameras, load_model, make_pool, recommend
-from active.recommend_outputs import check_output_dir, summary_lines, write_outputs
 from active.registry import selector_options_dataclass
 from arguments import add_config_args, config_from_args, config_to_dict
+from recommender.outputs import check_output_dir, summary_lines, write_outputs
+from recommender.pipeline import candidate_cameras, load_model, make_pool, recommend
 from utils.errors import UserError, run_cli
 
 SelectorOptions = selector_options_dataclass()

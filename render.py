@@ -14,7 +14,6 @@ the ground truth or the render differs from the background (metrics.py's "object
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -24,16 +23,16 @@ import torch
 from tqdm import tqdm
 
 from active.uncertainty import (UNCERTAINTY_KINDS, fisherrf_information, fisherrf_map, gaussian_uncertainty,
-                                parse_uncertainty_kinds, recorded_train_views, uncertainty_map, view_information)
+                                parse_uncertainty_kinds, uncertainty_map, view_information)
 from arguments import ActiveConfig, config_from_dict
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
-from scene.trained import TrainedModel, load_trained
+from scene.trained import TrainedModel, load_trained, recorded_train_views
 from utils.colormap import colorize_log, log_range, save_colorbar
 from utils.errors import run_cli
 from utils.image import save_image
-from utils.model_dir import CFG_ARGS, render_dir
+from utils.model_dir import render_dir
 
 
 @torch.no_grad()
@@ -90,7 +89,7 @@ def model_uncertainty(trained: TrainedModel, kinds: tuple[str, ...]) -> dict[str
     """Per kind, the per-Gaussian values from the model's recorded training views: u_i (the run's sigma, ridge and
     Fisher parameter groups, from cfg_args) for "position_variance", FisherRF's colour information for "fisherrf",
     None for "fisherrf_view" (it needs each rendered view). {kind: [N] or None}"""
-    saved = json.loads((trained.path / CFG_ARGS).read_text()).get("active", {})
+    saved = trained.record.get("active", {})
     active = config_from_dict(ActiveConfig, saved) if saved else ActiveConfig()
     views = recorded_train_views(trained.path, trained.iteration, len(trained.scene.train_cameras), active.method)
     cameras, out = trained.scene.train_cameras, {}

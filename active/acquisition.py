@@ -1,7 +1,7 @@
 """One acquisition step as a library call: build the selector's oracle over a pool of cameras, run the selector.
 
-`select_views` is the single place where a `SelectionContext` is assembled; `train.py`'s acquisition stage and
-`active.recommend` (recommend.py) both call it, so the same model, prior, candidates and seed give the same picks
+`run_selection` is the single place where a `SelectionContext` is assembled; `train.py`'s acquisition stage and
+`recommender.pipeline` (recommend.py) both call it, so the same model, prior, candidates and seed give the same picks
 from either entry point. Candidate cameras need a pose, intrinsics and a size only: no image is read.
 """
 from __future__ import annotations
@@ -81,10 +81,10 @@ class _RecordingOracle:
         return getattr(self._oracle, name)
 
 
-def select_views(selector: Selector, gaussians: GaussianModel, cameras: list[Camera], train_ids: list[int],
-                 candidate_ids: list[int], k: int, background: torch.Tensor, settings: RasterSettings, *,
-                 seed: int = 0, stage: int = 0, fisher: FisherSettings = FisherSettings(),
-                 progress: bool = False) -> Acquisition:
+def run_selection(selector: Selector, gaussians: GaussianModel, cameras: list[Camera], train_ids: list[int],
+                  candidate_ids: list[int], k: int, background: torch.Tensor, settings: RasterSettings, *,
+                  seed: int = 0, stage: int = 0, fisher: FisherSettings = FisherSettings(),
+                  progress: bool = False) -> Acquisition:
     """Choose `k` of `candidate_ids` (indices into `cameras`) given the prior of `train_ids` (indices too).
 
     The generator is seeded with `seed * SEED_STRIDE + stage`; the camera centres and the scene centre (the point

@@ -24,9 +24,6 @@ That is the kind "position_variance". Two more kinds follow FisherRF's `render_u
 """
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import torch
 
 from active.fisher import (FISHER_PARAM_GROUPS, REFERENCE_DIAGONAL_GROUPS, fisher_view_blocks, fisher_view_diagonals,
@@ -35,8 +32,8 @@ from active.logdet import BlockInformation
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
-from utils.errors import UserError, parse_distinct_choices
-from utils.model_dir import SELECTION, UNCERTAINTY_KINDS
+from utils.errors import parse_distinct_choices
+from utils.model_dir import UNCERTAINTY_KINDS
 
 
 def gaussian_uncertainty(gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
@@ -106,29 +103,3 @@ def fisherrf_map(camera: Camera, gaussians: GaussianModel, information: torch.Te
     empty = image == 0
     return torch.where(empty, image.max(), image) if not bool(empty.all()) else image
 
-
-def recorded_train_views(model_path: Path, iteration: int, num_train: int, method: str) -> list[int]:
-    """The training views of the model saved at `iteration`: from selection.json for an active run (the set of the
-    stage that iteration belongs to), all `num_train` training cameras for a run without --method (`method` "").
-
-    Raises:
-        UserError: an active run without a readable selection.json, or a run with no training cameras.
-    """
-    if not method:
-        if num_train == 0:
-            raise UserError(f"{model_path}: the scene has no training cameras, so no training views to take the "
-                            "uncertainty from")
-        return list(range(num_train))
-    path = model_path / SELECTION
-    try:
-        selection = json.loads(path.read_text())
-        stages, final = selection["stages"], selection.get("final")
-        for stage in stages:  # the training set before acquisition s trained up to stage s's iteration
-            if iteration <= stage["iteration"]:
-                return list(stage["train_views"])
-        if final is not None:
-            return list(final["train_views"])
-    except (OSError, ValueError, KeyError, TypeError):
-        pass
-    raise UserError(f"{model_path}: no training views recorded for iteration {iteration} (selection.json missing, "
-                    "unfinished or malformed); --uncertainty needs a finished train.py run")

@@ -35,11 +35,10 @@ from active.fisher import FISHER_PARAM_GROUPS, DiagonalGainOracle, fisher_view_b
     parameter_columns
 from active.brute_force import check_inputs, subset_rhos
 from active.logdet import BlockGainOracle, BlockInformation
-from active.uncertainty import recorded_train_views
 from arguments import ActiveConfig, config_from_dict
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from gaussian_renderer.projection import camera_centers, look_at_point
-from scene.trained import load_trained
+from scene.trained import load_trained, recorded_train_views
 from utils.errors import UserError, run_cli
 
 STOCHASTIC = ("lite_gs", "ssg", "random")
@@ -60,7 +59,7 @@ def run(model: Path, candidates_count: int, ks: list[int], deltas: list[float], 
     check_inputs(candidates_count, ks, deltas, max_subsets)
     t_start = time.perf_counter()
     trained = load_trained(model)
-    saved = json.loads((trained.path / "cfg_args").read_text()).get("active", {})
+    saved = trained.record.get("active", {})
     active = config_from_dict(ActiveConfig, saved) if saved else ActiveConfig()
     cameras = trained.scene.train_cameras
     train = recorded_train_views(trained.path, trained.iteration, len(cameras), active.method)

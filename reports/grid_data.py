@@ -10,6 +10,7 @@ import numpy as np
 
 from reports.run_data import latest, read_json
 from utils.errors import UserError
+from utils.model_dir import CFG_ARGS, RESULTS, RUN_STATUS, SELECTION
 
 _SEED = re.compile(r"seed(\d+)")
 
@@ -32,9 +33,9 @@ class GridRun:
 
 def read_run(path: Path, scene: str, tag: str, seed: int) -> GridRun:
     """A `GridRun` from a model directory."""
-    selection = read_json(path / "selection.json") or {}
-    status = read_json(path / "run_status.json") or {}
-    results_all = read_json(path / "results.json") or {}
+    selection = read_json(path / SELECTION) or {}
+    status = read_json(path / RUN_STATUS) or {}
+    results_all = read_json(path / RESULTS) or {}
     key = latest([Path(k) for k in results_all])
     results = results_all[key.name] if key is not None else None
     stages = selection.get("stages", [])
@@ -64,13 +65,13 @@ def find_runs(setup_dir: str | Path) -> list[GridRun]:
     if not setup_dir.is_dir():
         raise UserError(f"{setup_dir} is not a directory; pass a grid output folder OUT/<setup> of scripts/grid.py")
     runs = []
-    for cfg in sorted(setup_dir.glob("*/*/seed*/cfg_args")):
+    for cfg in sorted(setup_dir.glob(f"*/*/seed*/{CFG_ARGS}")):
         run_dir = cfg.parent
         m = _SEED.fullmatch(run_dir.name)
         if m:
             runs.append(read_run(run_dir, run_dir.parent.parent.name, run_dir.parent.name, int(m.group(1))))
     if not runs:
-        raise UserError(f"no runs under {setup_dir} (looked for <scene>/<method>/seed<S>/cfg_args); pass the "
+        raise UserError(f"no runs under {setup_dir} (looked for <scene>/<method>/seed<S>/{CFG_ARGS}); pass the "
                         "folder OUT/<setup> that scripts/grid.py wrote")
     return sorted(runs, key=lambda r: (r.scene, r.tag, r.seed))
 

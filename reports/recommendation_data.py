@@ -23,6 +23,7 @@ from reports import colors
 from reports.cameras import CameraView, camera_from_entry, read_cameras_json
 from reports.run_data import gaussian_points, latest, read_json
 from utils.errors import UserError
+from utils.model_dir import CAMERAS, CFG_ARGS, POINT_CLOUD_DIR, POINT_CLOUD_PLY
 
 FILE = "recommendations.json"
 
@@ -67,12 +68,12 @@ def captured_cameras(record: dict[str, Any], absent: list[str]) -> list[CameraVi
         return [pose_camera(e, "captured views", colors.SEED) for e in record["captured"]]
     model = Path(str(record.get("model", "")))
     ids = (record.get("prior") or {}).get("view_ids")
-    if ids and (model / "cameras.json").is_file():
-        num_test = int(((read_json(model / "cfg_args") or {}).get("dataset") or {}).get("num_test", 0))
-        entries = read_cameras_json(model / "cameras.json")
+    if ids and (model / CAMERAS).is_file():
+        num_test = int(((read_json(model / CFG_ARGS) or {}).get("dataset") or {}).get("num_test", 0))
+        entries = read_cameras_json(model / CAMERAS)
         return [camera_from_entry(entries[num_test + v], "captured views", colors.SEED, info={"view": v})
                 for v in ids if num_test + v < len(entries)]
-    absent.append("captured camera poses (neither captured[] nor a model directory with cameras.json)")
+    absent.append(f"captured camera poses (neither captured[] nor a model directory with {CAMERAS})")
     return []
 
 
@@ -83,8 +84,8 @@ def model_points(record: dict[str, Any], absent: list[str]) -> tuple[np.ndarray,
     if model.is_file():
         ply = model
     elif model.is_dir():
-        it = latest([p for p in (model / "point_cloud").glob("iteration_*") if (p / "point_cloud.ply").is_file()])
-        ply = it / "point_cloud.ply" if it is not None else None
+        it = latest([p for p in (model / POINT_CLOUD_DIR).glob("iteration_*") if (p / POINT_CLOUD_PLY).is_file()])
+        ply = it / POINT_CLOUD_PLY if it is not None else None
     if ply is None:
         absent.append(f"the model's Gaussians ({record.get('model', 'no model path recorded')} is not readable here)")
         return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8), "no points"

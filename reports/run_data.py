@@ -17,6 +17,8 @@ import numpy as np
 from reports import colors
 from reports.cameras import CameraView, camera_from_entry, read_cameras_json
 from utils.errors import UserError
+from utils.model_dir import (CAMERAS, CFG_ARGS, INPUT_PLY, PER_VIEW, POINT_CLOUD_DIR, POINT_CLOUD_PLY, RESULTS, RUN_STATUS,
+                             SELECTION)
 
 MAX_POINTS = 4000      # Gaussian centres drawn (uniform subsample of the opaque ones)
 MAX_GALLERY = 24       # test views in the gallery (evenly spaced when there are more)
@@ -108,7 +110,7 @@ def run_cameras(entries: list[dict], num_test: int, selection: dict | None) -> l
         return test
     named = [v for s in (selection or {}).get("stages", []) for v in s["train_views"] + s["selected"]]
     if named and max(named) >= len(train):
-        raise UserError(f"selection.json names training view {max(named)} but cameras.json has {len(train)} "
+        raise UserError(f"{SELECTION} names training view {max(named)} but {CAMERAS} has {len(train)} "
                         "training views; the files are from different runs")
     if not selection or not selection.get("stages"):
         return test + [camera_from_entry(e, "training views", colors.TRAIN, info={"view": v})
@@ -200,38 +202,38 @@ def gather_run(model_dir: str | Path) -> RunData:
     model_dir = Path(model_dir)
     if not model_dir.is_dir():
         raise UserError(f"{model_dir} is not a directory; pass -m MODEL_DIR written by train.py")
-    cfg = read_json(model_dir / "cfg_args")
-    cam_entries = read_cameras_json(model_dir / "cameras.json") if (model_dir / "cameras.json").is_file() else None
+    cfg = read_json(model_dir / CFG_ARGS)
+    cam_entries = read_cameras_json(model_dir / CAMERAS) if (model_dir / CAMERAS).is_file() else None
     if cfg is None and cam_entries is None:
-        raise UserError(f"{model_dir} holds neither cfg_args nor cameras.json, so it is not a model directory "
+        raise UserError(f"{model_dir} holds neither {CFG_ARGS} nor {CAMERAS}, so it is not a model directory "
                         "written by train.py; pass -m MODEL_DIR")
     absent: list[str] = []
     if cfg is None:
-        absent.append("cfg_args (the run's settings)")
-    selection = read_json(model_dir / "selection.json")
+        absent.append(f"{CFG_ARGS} (the run's settings)")
+    selection = read_json(model_dir / SELECTION)
     if selection is None:
-        absent.append("selection.json (no active selection: a run trained on all its views, or a run stopped "
+        absent.append(f"{SELECTION} (no active selection: a run trained on all its views, or a run stopped "
                       "before its first acquisition)")
-    status = read_json(model_dir / "run_status.json")
+    status = read_json(model_dir / RUN_STATUS)
     num_test = int((cfg or {}).get("dataset", {}).get("num_test", 0))
     if cam_entries is None:
-        absent.append("cameras.json (no cameras drawn)")
+        absent.append(f"{CAMERAS} (no cameras drawn)")
     cameras = run_cameras(cam_entries or [], num_test, selection)
 
-    ply = latest([p for p in (model_dir / "point_cloud").glob("iteration_*") if (p / "point_cloud.ply").is_file()])
+    ply = latest([p for p in (model_dir / POINT_CLOUD_DIR).glob("iteration_*") if (p / POINT_CLOUD_PLY).is_file()])
     if ply is not None:
-        xyz, rgb, n = gaussian_points(ply / "point_cloud.ply")
+        xyz, rgb, n = gaussian_points(ply / POINT_CLOUD_PLY)
         note = f"{len(xyz)} of {n} Gaussian centres ({ply.name}), colours from SH degree 0"
-    elif (model_dir / "input.ply").is_file():
-        xyz, rgb, n = gaussian_points(model_dir / "input.ply")
-        note = f"{len(xyz)} of {n} initial points (input.ply): no trained Gaussians were saved"
-        absent.append("point_cloud/iteration_N/point_cloud.ply (trained Gaussians)")
+    elif (model_dir / INPUT_PLY).is_file():
+        xyz, rgb, n = gaussian_points(model_dir / INPUT_PLY)
+        note = f"{len(xyz)} of {n} initial points ({INPUT_PLY}): no trained Gaussians were saved"
+        absent.append(f"{POINT_CLOUD_DIR}/iteration_N/{POINT_CLOUD_PLY} (trained Gaussians)")
     else:
         xyz, rgb, note = np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8), "no points"
-        absent.append("point_cloud/ and input.ply (no points drawn)")
+        absent.append(f"{POINT_CLOUD_DIR}/ and {INPUT_PLY} (no points drawn)")
 
-    results_all = read_json(model_dir / "results.json")
-    per_view_all = read_json(model_dir / "per_view.json") or {}
+    results_all = read_json(model_dir / RESULTS)
+    per_view_all = read_json(model_dir / PER_VIEW) or {}
     method_dir = latest([d for d in (model_dir / "test").glob("ours_*") if (d / "renders").is_dir()])
     method_key = method_dir.name if method_dir is not None else None
     results = None
@@ -239,7 +241,7 @@ def gather_run(model_dir: str | Path) -> RunData:
         key = method_key if method_key in results_all else latest([Path(k) for k in results_all]).name
         method_key, results = key, results_all[key]
     else:
-        absent.append("results.json (run metrics.py -m MODEL_DIR for PSNR / SSIM / LPIPS)")
+        absent.append(f"{RESULTS} (run metrics.py -m MODEL_DIR for PSNR / SSIM / LPIPS)")
     gallery, colorbars = [], {}
     if method_dir is None:
         absent.append("test/ours_N/renders (run render.py -m MODEL_DIR for the gallery)")
@@ -256,11 +258,11 @@ def gather_run(model_dir: str | Path) -> RunData:
 
     incomplete = None
     if status is None:
-        incomplete = "run_status.json is absent: the run may not have started or finished"
+        incomplete = f"{RUN_STATUS} is absent: the run may not have started or finished"
     elif status.get("status") != "complete":
         done = status.get("iteration")
         total = status.get("total_iterations", (cfg or {}).get("total_iterations"))
-        incomplete = (f"incomplete: run_status.json says '{status.get('status')}'"
+        incomplete = (f"incomplete: {RUN_STATUS} says '{status.get('status')}'"
                       + (f" at iteration {done} of {total}" if done is not None else "")
                       + f"; this report shows what finished ({len((selection or {}).get('stages', []))} "
                         "acquisition stages recorded)")

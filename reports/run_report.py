@@ -10,6 +10,7 @@ from reports.figures import psnr_views_figure, scene_figure
 from reports.images import data_uri, error_map, file_uri, open_rgb
 from reports.page import Page, esc, image_cell
 from reports.run_data import RunData, gather_run, uncertainty_keys
+from utils.model_dir import CFG_ARGS, RESULTS, SELECTION
 
 REPORT_NAME = "report.html"
 
@@ -30,7 +31,7 @@ def settings_rows(run: RunData) -> list[tuple[str, str]]:
     method = sel_cfg.get("method", active.get("method"))
     options = sel_cfg.get("selector_options")
     rows = [("method", f"{method}" + (f" {json.dumps(options)}" if options else "") if run.selection
-             else f"{method or '–'} (no selection.json: no active selection recorded)")]
+             else f"{method or '–'} (no {SELECTION}: no active selection recorded)")]
     if active:
         rows.append(("schedule", f"{active.get('num_init_views')} seed views, {active.get('views_per_step')} per "
                                  f"step, up to {active.get('max_views')} views, {active.get('iters_per_view')} "
@@ -42,7 +43,7 @@ def settings_rows(run: RunData) -> list[tuple[str, str]]:
              ("seed", _fmt(cfg.get("run", {}).get("seed"))),
              ("dataset", f"{model.get('source_path', '–')} ({json.dumps(cfg.get('dataset', {}))})")]
     for key in ("commit", "machine"):
-        rows.append((key, _fmt(cfg.get(key)) if key in cfg else "not recorded in cfg_args"))
+        rows.append((key, _fmt(cfg.get(key)) if key in cfg else f"not recorded in {CFG_ARGS}"))
     return rows
 
 
@@ -91,7 +92,7 @@ def build_run_page(run: RunData) -> Page:
                    "by stage; drag to rotate, scroll to zoom, click a legend entry to hide a group.", "small")
     page.figure(scene_figure(run.points, run.point_colors, run.cameras), "scene3d")
     if run.selection:
-        page.paragraph("selection.json records the gains of the picks only; candidates not picked are grey.", "small")
+        page.paragraph(f"{SELECTION} records the gains of the picks only; candidates not picked are grey.", "small")
 
     if run.stages:
         page.heading("Acquisition stages")
@@ -113,7 +114,7 @@ def build_run_page(run: RunData) -> Page:
             page.heading("Uncertainty vs error (metrics.py)")
             page.table(["metric", "map kind", "region", "value"], [[m, k, g, f"{v:.4f}"] for m, k, g, v in unc])
     else:
-        page.paragraph("no results.json (run metrics.py -m MODEL_DIR)")
+        page.paragraph(f"no {RESULTS} (run metrics.py -m MODEL_DIR)")
 
     if run.gallery:
         page.heading("Test views")
@@ -125,7 +126,7 @@ def build_run_page(run: RunData) -> Page:
     page.heading("Settings")
     page.table(["setting", "value"], settings_rows(run))
     if run.cfg:
-        page.add(f"<details><summary>cfg_args</summary><pre>{esc(json.dumps(run.cfg, indent=1))}</pre></details>")
+        page.add(f"<details><summary>{CFG_ARGS}</summary><pre>{esc(json.dumps(run.cfg, indent=1))}</pre></details>")
     return page
 
 

@@ -1,7 +1,7 @@
 """A closed capture loop on the built-in scene, the one scene that can be photographed from any pose.
 
 Start from 3 views; each round trains a model on the views captured so far (train.py, from scratch), recommends K
-of N generated hemisphere poses (active.recommend, no images), "captures" them by rendering the built-in ground
+of N generated hemisphere poses (recommender, no images), "captures" them by rendering the built-in ground
 truth there, and repeats until the view budget. Test PSNR (the built-in test split) is recorded after every
 training, so each method gives a PSNR-vs-views curve.
 
@@ -14,116 +14,9 @@ training and recommending.
 from __future__ import annotations
 
 import argparse
-import json
-import math
-import shutil
-import sys
-import time
-from pathlib import Path
 
-import torch
-
-from active import build_selector
-from active.recommend import candidate_cameras, load_model, make_pool, recommend
-from active.recommend_outputs import write_outputs
-from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions, make_builtin_scene, render_rgba, scene_gaussians
-from scene.cameras import look_at
-from scene.frames import GL_TO_CV
-from utils import model_dir
+from experiments.closed_capture_loop import run_capture_loop
 from utils.errors import run_cli
-from utils.image import save_image
-from utils.io import write_json
-
-
-def capture(dataset: Path, viewmats: list[torch.Tensor], resolution: int, seed: int, start: int) -> list[dict]:
-    """Render the built-in ground truth at `viewmats` into dataset/train/c_NNN.png; the new transforms frames."""
-    focal = 0.5 * resolution / math.tan(0.5 * CAMERA_ANGLE_X)
-    intrinsics = torch.tensor([focal, focal, resolution / 2, resolution / 2])
-    gaussians = scene_gaussians(seed)
-    frames = []
-    for i, viewmat in enumerate(viewmats):
-        name = f"c_{start + i:03d}"
-        save_image(render_rgba(viewmat.double(), intrinsics, resolution, resolution, seed, gaussians),
-                   dataset / "train" / f"{name}.png")
-        c2w = torch.linalg.inv(viewmat.double()) @ GL_TO_CV
-        frames.append({"file_path": f"./train/{name}", "transform_matrix": c2w.tolist()})
-    return frames
-
-
-def train(dataset: Path, model: Path, iterations: int, seed: int, max_gaussians: int) -> float:
-    """train.py on every captured view (from scratch); returns the test PSNR."""
-    import subprocess
-    root = Path(__file__).resolve().parents[1]
-    cmd = [sys.executable, str(root / "train.py"), "-s", str(dataset), "-m", str(model), "--eval", "--iterations",
-           str(iterations), "--seed", str(seed), "--max_gaussians", str(max_gaussians), "--quiet", "--overwrite",
-           "--densify_from_iter", "100", "--densification_interval", "50"]
-    subprocess.run(cmd, check=True, cwd=root, capture_output=True, text=True)
-    return json.loads((model / model_dir.RUN_STATUS).read_text())["test_psnr"]
-
-
-def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dict:
-    """One closed loop; writes out/loop.json."""
-    if out.exists():
-        shutil.rmtree(out)
-    dataset = out / "data"
-    (dataset / "train").mkdir(parents=True)
-    builtin = make_builtin_scene(out.parent.parent / f"builtin_r{args.resolution}", 0, args.resolution, 3,
-                                 args.num_test)
-    shutil.copytree(builtin / "test", dataset / "test")
-    shutil.copy(builtin / "transforms_test.json", dataset / "transforms_test.json")
-    start = [look_at(eye) for eye in hemisphere_positions(3, 0.5)]
-    frames = capture(dataset, start, args.resolution, 0, 0)
-    rounds = []
-    while True:
-        write_json(dataset / "transforms_train.json", {"camera_angle_x": CAMERA_ANGLE_X, "frames": frames})
-        t0 = time.perf_counter()
-        model_path = out / "model"
-        psnr = train(dataset, model_path, args.iters_per_view * len(frames), seed, args.max_gaussians)
-        train_s = time.perf_counter() - t0
-        record = {"views": len(frames), "test_psnr": psnr, "train_seconds": train_s}
-        rounds.append(record)
-        print(f"{method} seed {seed}: {len(frames)} views, test PSNR {psnr:.2f} dB", flush=True)
-        if len(frames) >= args.budget:
-            break
-        t0 = time.perf_counter()
-        model = load_model(model_path)
-        pool = make_pool(model, candidate_cameras(f"hemisphere:{args.candidates}", model))
-        k = min(args.k, args.budget - len(frames))
-        rec = recommend(model, pool, build_selector(method), k, seed=seed * 1000 + len(rounds))
-        write_outputs(rec, model, out / f"recommend_{len(frames):02d}", candidates_spec=f"hemisphere:{args.candidates}",
-                      previews=False)
-        record["recommend_seconds"] = time.perf_counter() - t0
-        record["oracle_evaluated"] = rec.acquisition.evaluated if rec.acquisition else 0
-        frames += capture(dataset, [pool.cameras[v].viewmat.cpu() for v in rec.picks], args.resolution, 0,
-                          len(frames))
-    result = {"method": method, "seed": seed, "rounds": rounds, "settings": vars(args) | {"plot": None}}
-    write_json(out / "loop.json", result)
-    return result
-
-
-def plot(root: Path, png: Path) -> None:
-    """PSNR vs views, mean and min/max over seeds, one line per method."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for method_dir in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("builtin")):
-        runs = [json.loads(p.read_text()) for p in sorted(method_dir.glob("seed*/loop.json"))]
-        if not runs:
-            continue
-        views = [r["views"] for r in runs[0]["rounds"]]
-        values = torch.tensor([[r["test_psnr"] for r in run["rounds"]] for run in runs])  # [S, R]
-        ax.plot(views, values.mean(0), marker="o", label=f"{method_dir.name} ({len(runs)} seeds)")
-        ax.fill_between(views, values.min(0).values, values.max(0).values, alpha=0.15)
-    ax.set_xlabel("captured views")
-    ax.set_ylabel("test PSNR (dB)")
-    ax.set_title("Closed capture loop on the built-in scene")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
 
 
 def main() -> None:
@@ -141,14 +34,7 @@ def main() -> None:
     p.add_argument("--plot", help="only draw the curve of an output folder")
     p.add_argument("--png", default="docs/results/capture_loop/psnr_vs_views.png")
     args = p.parse_args()
-    if args.plot:
-        plot(Path(args.plot), Path(args.png))
-        return
-    root = Path(args.output)
-    for method in args.methods:
-        for seed in args.seeds:
-            run_loop(method, seed, root / method / f"seed{seed}", args)
-    plot(root, Path(args.png))
+    run_capture_loop(args)
 
 
 if __name__ == "__main__":

@@ -5,6 +5,10 @@ layer or the layers listed before it). Every import counts, also one inside a fu
 Data-driven: the modules are whatever .py files the tree holds, the order is whatever the page lists, so moving code
 between files or packages needs no change here; a top-level module or package the page does not list sits above
 every listed layer (nothing listed may import it).
+
+Beyond the order, the selection library `active/` stays a library: it draws no picture and writes no image file
+(no matplotlib, PIL or `utils.image`) and reads no model directory (no `scene.trained`, `utils.checkpoint`, nor a
+file name of `utils.model_dir`); its applications (training/, recommender/, the CLIs) do that (`LIBRARY_RULES`).
 """
 from __future__ import annotations
 
@@ -66,11 +70,11 @@ def _resolve(name: str, modules: dict[str, Path]) -> str | None:
     return None
 
 
-def import_edges(root: Path) -> tuple[dict[str, Path], list[Import]]:
-    """Every project module and every import of one project module by another (absolute and relative)."""
-    modules = project_modules(root)
-    edges = []
-    for source, path in sorted(modules.items()):
+def imported_names(root: Path) -> list[tuple[str, str, str]]:
+    """(module, dotted name, path:line) for every name every project module imports, third-party ones included:
+    `import a.b` gives "a.b", `from a import b` gives "a.b" (relative imports resolved against the package)."""
+    out = []
+    for source, path in sorted(project_modules(root).items()):
         package = source if path.name == "__init__.py" else source.rpartition(".")[0]
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
             if isinstance(node, ast.Import):
@@ -83,12 +87,40 @@ def import_edges(root: Path) -> tuple[dict[str, Path], list[Import]]:
                 names = [f"{base}.{alias.name}" if base else alias.name for alias in node.names]
             else:
                 continue
-            for name in names:
-                target = _resolve(name, modules)
-                edge = Import(source, target, f"{path.relative_to(root)}:{node.lineno}")
-                if target is not None and target != source and edge not in edges:
-                    edges.append(edge)
+            out += [(source, name, f"{path.relative_to(root)}:{node.lineno}") for name in names]
+    return out
+
+
+def import_edges(root: Path) -> tuple[dict[str, Path], list[Import]]:
+    """Every project module and every import of one project module by another (absolute and relative)."""
+    modules = project_modules(root)
+    edges = []
+    for source, name, where in imported_names(root):
+        target = _resolve(name, modules)
+        edge = Import(source, target, where)
+        if target is not None and target != source and edge not in edges:
+            edges.append(edge)
     return modules, edges
+
+
+# package -> (forbidden import prefixes, dotted names allowed despite a prefix)
+LIBRARY_RULES = {
+    "active": (("matplotlib", "PIL", "utils.image", "scene.trained", "utils.checkpoint", "utils.model_dir"),
+               ("utils.model_dir.UNCERTAINTY_KINDS",)),  # the map kinds' names, not a file of a model directory
+}
+
+
+def library_violations(root: Path, rules: dict[str, tuple[tuple[str, ...], tuple[str, ...]]]) -> list[str]:
+    """Imports by a package's modules of a name under one of its forbidden prefixes (and not allowed by name)."""
+    def under(name: str, prefix: str) -> bool:
+        return name == prefix or name.startswith(prefix + ".")
+
+    violations = []
+    for source, name, where in imported_names(root):
+        forbidden, allowed = rules.get(source.split(".")[0], ((), ()))
+        if any(under(name, p) for p in forbidden) and name not in allowed:
+            violations.append(f"{where}: {source} imports {name}")
+    return violations
 
 
 def import_cycles(edges: list[Import]) -> list[list[str]]:
@@ -159,6 +191,13 @@ def test_imports_follow_the_documented_layers():
     assert not violations, "imports against the layer order of docs/ARCHITECTURE.md:\n" + "\n".join(violations)
 
 
+def test_the_selection_library_draws_nothing_and_reads_no_model_directory():
+    violations = library_violations(ROOT, LIBRARY_RULES)
+    assert not violations, "active/ is the selection library; move this to its application:\n" + "\n".join(violations)
+    names = {name for module, name, _ in imported_names(ROOT) if module.startswith("active")}
+    assert "torch" in names and "active.fisher.fisher_view_blocks" in names  # the check reads active/'s imports
+
+
 def test_the_reader_sees_the_project():
     """Guards against a check that passes because it reads nothing (wrong root, a parse that finds no imports)."""
     modules, edges = import_edges(ROOT)
@@ -199,3 +238,21 @@ def test_the_checks_catch_cycles_and_imports_up_the_layers(bad_tree):
     violations = layer_violations(edges, layers)
     assert [v.split(":")[0] for v in violations] == ["low/up.py", "low/uses_script.py"]
     assert "low.up (layer 1) imports high.top (layer 2)" in violations[0]
+
+
+def test_the_library_rules_catch_pictures_and_model_directories(tmp_path):
+    files = {
+        "lib/__init__.py": "",
+        "lib/plot.py": "def f():\n    import matplotlib.pyplot as plt\n",
+        "lib/image.py": "from PIL import Image\n",
+        "lib/files.py": "from utils.model_dir import CFG_ARGS, KINDS\nfrom utils import model_dir\n",
+        "lib/fine.py": "import math\nfrom .plot import f\nimport PILLOW\n",
+        "app.py": "import matplotlib\n",  # not under a rule
+    }
+    for name, text in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    rules = {"lib": (("matplotlib", "PIL", "utils.model_dir"), ("utils.model_dir.KINDS",))}
+    assert library_violations(tmp_path, rules) == [
+        "lib/files.py:1: lib.files imports utils.model_dir.CFG_ARGS", "lib/files.py:2: lib.files imports utils.model_dir",
+        "lib/image.py:1: lib.image imports PIL.Image", "lib/plot.py:2: lib.plot imports matplotlib.pyplot"]

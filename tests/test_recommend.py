@@ -1,4 +1,4 @@
-"""recommend.py / active.recommend: same picks as train.py, foreign PLYs, pose files, generated poses, bad input."""
+"""recommend.py / recommender: same picks as train.py, foreign PLYs, pose files, generated poses, bad input."""
 from __future__ import annotations
 
 import json
@@ -11,10 +11,11 @@ import torch
 from plyfile import PlyData, PlyElement
 
 from active import build_selector
-from active.candidates import generate
-from active.recommend import load_model, make_pool, recommend
+from recommender.candidates import generate
+from recommender.pipeline import load_model, make_pool, recommend
 from scene.cameras import Camera, look_at
 from scene.pose_files import read_pose_file
+from scene.trained import load_trained
 from tests.conftest import run_cli
 
 FOCAL = 40.0  # px, for 32 x 32 test cameras
@@ -66,12 +67,14 @@ def test_same_picks_as_train_py_and_no_image_is_read(tiny_scene, tmp_path):
     stage = json.loads((model / "selection.json").read_text())["stages"][0]
     assert stage["iteration"] == 20
     shutil.rmtree(data)  # recommend reads poses only: no dataset, no image
+    trained = load_trained(model, 20, cameras_only=True)  # what recommend.py reads the model directory with
+    assert trained.scene is None and len(trained.train_cameras) == 14 and trained.record["dataset"]["num_test"] == 4
     out = tmp_path / "next"
     r = run_cli("recommend.py", "-m", str(model), "--iteration", "20", "--candidates", "unused", "-k", "3",
                 "--seed", "3", "-o", str(out), "--quiet")
     assert r.returncode == 0, r.stderr
     rec = json.loads((out / "recommendations.json").read_text())
-    assert [p["candidate"] for p in rec["picks"]] == stage["selected"]
+    assert len(stage["selected"]) == 3 and [p["candidate"] for p in rec["picks"]] == stage["selected"]
     assert [p["gain"] for p in rec["picks"]] == pytest.approx(stage["gains"], rel=1e-9)
     assert rec["prior"]["view_ids"] == stage["train_views"]
     assert rec["oracle_calls"] == stage["oracle_calls"]
@@ -84,6 +87,7 @@ def test_same_picks_as_train_py_and_no_image_is_read(tiny_scene, tmp_path):
     assert len(evaluated) <= rec["oracle_calls"]["evaluated"] and len(rec["candidate_gains"]) == 12
     # The picks' transforms.json is one train.py's nerfstudio reader takes once the images are captured.
     frames = json.loads((out / "transforms.json").read_text())["frames"]
+    assert len(frames) == len(rec["picks"])
     for p, f in zip(rec["picks"], frames):
         assert f["transform_matrix"] == p["transform_matrix"]
         c2w_cv = torch.tensor(p["c2w"], dtype=torch.float64)

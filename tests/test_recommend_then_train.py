@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from experiments.recommend_then_train import make_seed_dataset
+from experiments.recommend_train_loop import make_seed_dataset
 from tests.conftest import ROOT, run_cli
 
 SCRIPT = ROOT / "scripts" / "recommend_then_train.py"
@@ -13,7 +13,7 @@ SCRIPT = ROOT / "scripts" / "recommend_then_train.py"
 def test_seed_dataset_links_seed_and_test_images_only(tiny_scene, tmp_path):
     seeds, candidates = make_seed_dataset(tiny_scene, tmp_path, 5)
     frames = json.loads((tiny_scene / "transforms_train.json").read_text())["frames"]
-    assert len(seeds) == 5 and sorted(seeds + candidates) == list(range(len(frames)))
+    assert len(seeds) == 5 and candidates and sorted(seeds + candidates) == list(range(len(frames)))
     folder = tmp_path / "data"
     kept = json.loads((folder / "transforms_train.json").read_text())["frames"]
     assert [f["file_path"] for f in kept] == [frames[v]["file_path"] for v in seeds]
@@ -22,7 +22,7 @@ def test_seed_dataset_links_seed_and_test_images_only(tiny_scene, tmp_path):
     assert all((folder / (frames[v]["file_path"] + ".png")).is_file() for v in seeds)
     assert not any((folder / (frames[v]["file_path"] + ".png")).exists() for v in candidates)
     test = json.loads((folder / "transforms_test.json").read_text())["frames"]
-    assert all((folder / (f["file_path"] + ".png")).is_file() for f in test)
+    assert test and all((folder / (f["file_path"] + ".png")).is_file() for f in test)
 
 
 @pytest.mark.slow

@@ -9,8 +9,9 @@ import torch
 
 from active.logdet import BlockInformation
 from active.uncertainty import (camera_depths, fisherrf_information, fisherrf_map, gaussian_uncertainty,
-                                parse_uncertainty_kinds, recorded_train_views, uncertainty_map, view_information)
+                                parse_uncertainty_kinds, uncertainty_map, view_information)
 from gaussian_renderer import render
+from scene.trained import recorded_train_views
 from tests.conftest import run_cli
 from tests.test_fisher_oracle import BG, bruteforce_blocks, cameras, settings, tiny_model
 from tests.test_fisherrf import bruteforce_diagonals, bruteforce_reference_diagonals

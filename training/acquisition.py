@@ -28,13 +28,14 @@ def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
     return farthest_point_views(centers, a.num_init_views)
 
 
-def select_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: Selector, k: int,
-                 background: torch.Tensor, settings: RasterSettings) -> dict[str, Any]:
-    """Run the selector for one acquisition step; returns the stage record for selection.json."""
+def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: Selector, k: int,
+                  background: torch.Tensor, settings: RasterSettings) -> dict[str, Any]:
+    """The training run's acquisition step: `active.acquisition.run_selection` over the training cameras not trained
+    on yet (seeded by --seed and the stage); returns the stage record for selection.json."""
     candidates = [v for v in range(len(scene.train_cameras)) if v not in state.train_views]
-    step = acquisition.select_views(selector, state.gaussians, scene.train_cameras, state.train_views, candidates, k,
-                                    background, settings, seed=cfg.run.seed, stage=state.stage,
-                                    fisher=acquisition.FisherSettings.from_active(cfg.active))
+    step = acquisition.run_selection(selector, state.gaussians, scene.train_cameras, state.train_views, candidates, k,
+                                     background, settings, seed=cfg.run.seed, stage=state.stage,
+                                     fisher=acquisition.FisherSettings.from_active(cfg.active))
     selection = step.selection
     return {
         "stage": state.stage,

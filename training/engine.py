@@ -26,7 +26,7 @@ from gaussian_renderer import RasterSettings
 from scene.resolution_policy import training_resolution
 from scene.scene import Scene
 from scene.trained import background_color, raster_settings
-from training.acquisition import seed_views, select_views
+from training.acquisition import acquire_views, seed_views
 from training.config import TrainConfig, default_model_path, make_selector
 from training.optim import PositionLRSchedule
 from training.state import TrainState, capture_state, fresh_state, restore_state
@@ -156,7 +156,7 @@ def acquire(run: Run, progress: tqdm) -> None:
     k = run.plan.adds[state.stage]
     progress.write(f"[stage {state.stage}] selecting {k} of {len(run.scene.train_cameras) - len(state.train_views)} "
                    f"candidates with {cfg.active.method}")
-    record = select_views(state, run.scene, cfg, run.selector, k, run.background, run.settings)
+    record = acquire_views(state, run.scene, cfg, run.selector, k, run.background, run.settings)
     state.stages.append(record)
     state.train_views = state.train_views + record["selected"]
     state.view_stack = []

@@ -24,6 +24,7 @@ RESULTS = "results.json"
 PER_VIEW = "per_view.json"
 POINT_CLOUD_DIR = "point_cloud"
 CHECKPOINTS_DIR = "checkpoints"
+POINT_CLOUD_PLY = "point_cloud.ply"  # in point_cloud/iteration_N/
 METHOD_PATTERN = re.compile(r"ours_(\d+)")  # `method_name`: render folders and results.json keys
 
 
@@ -34,7 +35,7 @@ def iteration_dir_name(iteration: int) -> str:
 
 def point_cloud_ply(model_dir: Path, iteration: int) -> Path:
     """<model>/point_cloud/iteration_N/point_cloud.ply."""
-    return Path(model_dir) / POINT_CLOUD_DIR / iteration_dir_name(iteration) / "point_cloud.ply"
+    return Path(model_dir) / POINT_CLOUD_DIR / iteration_dir_name(iteration) / POINT_CLOUD_PLY
 
 
 def checkpoint_file(model_dir: Path, iteration: int) -> Path:

@@ -21,10 +21,10 @@ from typing import Any
 
 import torch
 
-from active.candidates import CaptureFrame
-from active.recommend import LoadedModel, Recommendation
 from active.uncertainty import gaussian_uncertainty, uncertainty_map
 from gaussian_renderer import render
+from recommender.candidates import CaptureFrame
+from recommender.pipeline import LoadedModel, Recommendation
 from scene.cameras import Camera
 from scene.pose_files import c2w_opengl
 from utils.errors import UserError

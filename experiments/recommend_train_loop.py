@@ -1,7 +1,9 @@
-"""The pieces of scripts/recommend_then_train.py: a seed-view dataset without the candidates' images, the runs of the
-project's CLIs, and the summary table (recommend from poses alone, then train on the picks)."""
+"""Recommend from poses alone, then train on the picks (CLI scripts/recommend_then_train.py, docs/recommend.md): a
+seed-view dataset without the candidates' images (`make_seed_dataset`), the runs of the project's CLIs (`run`), the
+loop over methods and seeds (`run_recommend_then_train`) and the summary table (`summary_table`)."""
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import statistics
@@ -15,6 +17,8 @@ import torch
 from active.schedule import farthest_point_views
 from experiments.jobs import THREAD_VARS
 from scene.pose_files import read_pose_file
+from utils import model_dir
+from utils.checkpoint import RunDirectory
 from utils.errors import UserError
 from utils.io import write_json
 
@@ -99,3 +103,56 @@ def summary_table(results: dict, methods: list[str], seeds: list[int]) -> str:
                      + f" | {statistics.mean(values):.2f} ± {spread:.2f} | {rows[0].get('picks', '–')} | "
                      + (f"{calls['evaluated']} / {calls['conservative']}" if calls else "–") + " |")
     return "\n".join(lines) + "\n"
+
+
+def run_recommend_then_train(args: argparse.Namespace) -> None:
+    """The whole experiment for scripts/recommend_then_train.py's parsed flags (`args`): the seed-view model, then per
+    method and seed recommend.py and the continued training; writes OUT/results.json and OUT/summary.md, reusing the
+    finished steps."""
+    data, out = Path(args.data), Path(args.output)
+    if not (data / "transforms_train.json").is_file() or not (data / "transforms_test.json").is_file():
+        raise UserError(f"{data} is not a Blender dataset with transforms_train.json and transforms_test.json")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "logs").mkdir(exist_ok=True)
+    seeds, candidates = make_seed_dataset(data, out, args.num_seed_views)
+    print(f"seed views {seeds}; {len(candidates)} candidate poses in {out / 'data' / 'candidates.json'} "
+          "(their images are not in that folder)")
+    common = ["-r", args.resolution, "--eval", "-w", "-q", *args.train_args.split()]
+    base = out / "base"
+    if not RunDirectory(base).is_complete():
+        secs = run(["train.py", "-s", str(out / "data"), "-m", str(base), "--iterations", str(args.base_iterations),
+                    "--overwrite", *common], args.threads, out / "logs" / "base.log")
+        print(f"base model on {len(seeds)} views: {secs:.0f} s")
+    base_status = json.loads((base / model_dir.RUN_STATUS).read_text())
+    base_ply = model_dir.point_cloud_ply(base, args.base_iterations)
+    results_path = out / "results.json"
+    results = json.loads(results_path.read_text()) if results_path.is_file() else {}
+    results["settings"] = {**vars(args), "seed_views": seeds, "candidates": len(candidates),
+                           "base_test_psnr": base_status["test_psnr"]}
+    for method in args.methods:
+        for seed in args.seeds:
+            key = f"{method}/seed{seed}"
+            row = results.get(key, {})
+            if method != "none" and "picks" not in row:
+                rec_dir = out / "recommend" / f"{method}_seed{seed}"
+                secs = run(["recommend.py", "-m", str(base), "--candidates", str(out / "data" / "candidates.json"),
+                            "-k", str(args.k), *method_args(method), "--seed", str(seed), "-o", str(rec_dir),
+                            "--quiet", "--no_previews"], args.threads, out / "logs" / f"recommend_{method}_{seed}.log")
+                rec = json.loads((rec_dir / "recommendations.json").read_text())
+                row = {"picks": [candidates[pick["candidate"]] for pick in rec["picks"]],
+                       "oracle_calls": rec["oracle_calls"], "recommend_seconds": secs}
+            views = seeds + row.get("picks", [])
+            model = out / "continue" / f"{method}_seed{seed}"
+            if "test_psnr" not in row or not RunDirectory(model).is_complete():
+                row["train_seconds"] = run(
+                    ["train.py", "-s", str(data), "-m", str(model), "--method", "random", "--init_views",
+                     *map(str, views), "--max_views", str(len(views)), "--views_per_step", str(args.k),
+                     "--iterations", str(args.iterations), "--init_ply", str(base_ply), "--seed", str(seed),
+                     "--overwrite", *common], args.threads, out / "logs" / f"continue_{method}_{seed}.log")
+                row["test_psnr"] = json.loads((model / model_dir.RUN_STATUS).read_text())["test_psnr"]
+            results[key] = row
+            write_json(results_path, results)
+            print(f"{key}: views {views} -> test PSNR {row['test_psnr']:.2f} dB")
+    (out / "summary.md").write_text(summary_table(results, args.methods, args.seeds))
+    print((out / "summary.md").read_text())
+

@@ -7,13 +7,12 @@
     write_outputs(rec, model, "output/lego/next")                      # recommendations.json, transforms.json, ...
 
 The prior H0 is the Fisher information of the captured views (a model directory's recorded training views; for a
-bare PLY the `captured` cameras). The selection itself is `active.acquisition.select_views`, the function train.py's
+bare PLY the `captured` cameras). The selection itself is `active.acquisition.run_selection`, the function train.py's
 acquisition stage calls: the same model, prior, candidates and seed give the same picks from either entry point.
 Candidates that see no Gaussian are left out of the selection (gain 0) and come only after every visible one.
 """
 from __future__ import annotations
 
-import json
 import logging
 import math
 import time
@@ -22,18 +21,16 @@ from pathlib import Path
 
 import torch
 
-from active.acquisition import Acquisition, FisherSettings, select_views
+from active.acquisition import Acquisition, FisherSettings, run_selection
 from active.base import Selector
-from active.candidates import generate, parse_spec
-from active.uncertainty import recorded_train_views
 from arguments import ModelConfig, PipelineConfig
 from gaussian_renderer import RasterSettings, project_gaussians
+from recommender.candidates import generate, parse_spec
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 from scene.pose_files import read_pose_file, scaled_camera
 from scene.resolution_policy import CUDA_MAX_WIDTH
-from scene.trained import background_color, find_iteration, load_model_config, raster_settings
-from utils import model_dir
+from scene.trained import load_trained, raster_settings, recorded_train_views
 from utils.errors import UserError
 
 log = logging.getLogger(__name__)
@@ -75,28 +72,16 @@ def load_model(model: str | Path, captured: str | Path | None = None, *, iterati
 
 
 def _load_model_dir(path: Path, iteration: int, device: str) -> LoadedModel:
-    model_cfg, pipeline_cfg = load_model_config(path)
-    iteration = find_iteration(path, iteration)
-    saved = json.loads((path / model_dir.CFG_ARGS).read_text())
-    active, dataset = saved.get("active", {}), saved.get("dataset")
-    if not isinstance(dataset, dict) or "num_test" not in dataset:
-        raise UserError(f"{path / model_dir.CFG_ARGS} records no dataset split (num_test); retrain the model with this train.py")
-    cameras_json = path / model_dir.CAMERAS
-    if not cameras_json.is_file():
-        raise UserError(f"{path} has no {model_dir.CAMERAS}; retrain the model or restore the file")
-    cameras = [c.to(device) for c in read_pose_file(cameras_json)[dataset["num_test"]:]]  # test first, then train
-    train_ids = recorded_train_views(path, iteration, len(cameras), active.get("method", ""))
-    gaussians = GaussianModel.load_ply(model_dir.point_cloud_ply(path, iteration), device=device)
-    gaussians.active_sh_degree = GaussianModel.trained_sh_degree(  # as when trained
-        iteration, gaussians.max_sh_degree, bool(saved.get("model", {}).get("init_ply")))
+    trained = load_trained(path, iteration, device=device, cameras_only=True, sh_degree_as_trained=True)
+    cameras, active = trained.train_cameras, trained.record.get("active", {})
+    train_ids = recorded_train_views(path, trained.iteration, len(cameras), active.get("method", ""))
     defaults = FisherSettings()
     fisher = FisherSettings(active.get("sigma", defaults.sigma), active.get("delta_rel", defaults.delta_rel),
                             active.get("delta_abs", defaults.delta_abs),
                             active.get("fisher_params", defaults.param_groups),
                             active.get("fisher_mode", defaults.mode), active.get("fisher_cache_mb", defaults.cache_mb))
-    return LoadedModel(path, "model_dir", gaussians, [cameras[v] for v in train_ids],
-                       background_color(model_cfg, device), raster_settings(pipeline_cfg), fisher, iteration,
-                       cameras, list(train_ids))
+    return LoadedModel(path, "model_dir", trained.gaussians, [cameras[v] for v in train_ids], trained.background,
+                       trained.settings, fisher, trained.iteration, cameras, list(train_ids))
 
 
 def candidate_cameras(spec: str, model: LoadedModel, *, elevation: tuple[float, float] | None = None,
@@ -212,9 +197,9 @@ def recommend(model: LoadedModel, pool: Pool, selector: Selector, k: int, *, see
                      "gain 0, never picked before a visible one")
     picks, gains, step = [], [], None
     if seen:
-        step = select_views(selector, model.gaussians, pool.cameras, pool.train_ids, seen, min(k_taken, len(seen)),
-                            model.background, model.settings, seed=seed, stage=0, fisher=model.fisher,
-                            progress=progress)
+        step = run_selection(selector, model.gaussians, pool.cameras, pool.train_ids, seen, min(k_taken, len(seen)),
+                             model.background, model.settings, seed=seed, stage=0, fisher=model.fisher,
+                             progress=progress)
         picks, gains = list(step.selection.ids), list(step.selection.gains)
     for v in unseen[:k_taken - len(picks)]:
         picks.append(v)

@@ -1,0 +1,62 @@
+"""experiments/closed_capture_loop.py (CLI scripts/capture_loop.py): the built-in ground truth "captured" at given
+poses, and the plot of an output folder (the loop itself trains with train.py: `test_the_cli_runs_one_round`, slow)."""
+import json
+import math
+
+import pytest
+import torch
+
+from experiments.closed_capture_loop import capture, run_capture_loop
+from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions
+from scene.cameras import look_at
+from scene.frames import GL_TO_CV
+from scene.pose_files import read_pose_file
+from tests.conftest import ROOT, run_cli
+from utils.image import load_rgba
+
+
+@pytest.mark.auto_backend  # the built-in ground truth renders with the user's default, as the script does
+def test_capture_writes_images_and_frames_that_read_back_as_the_poses(tmp_path):
+    viewmats = [look_at(eye) for eye in hemisphere_positions(2, 0.5)]
+    (tmp_path / "train").mkdir()
+    frames = capture(tmp_path, viewmats, 16, 0, 5)
+    assert [f["file_path"] for f in frames] == ["./train/c_005", "./train/c_006"]
+    for f, viewmat in zip(frames, viewmats):
+        assert load_rgba(tmp_path / (f["file_path"] + ".png")).shape[-2:] == (16, 16)
+        c2w = torch.linalg.inv(viewmat.double()) @ GL_TO_CV
+        assert torch.allclose(torch.tensor(f["transform_matrix"], dtype=torch.float64), c2w)
+    (tmp_path / "transforms.json").write_text(json.dumps({"camera_angle_x": CAMERA_ANGLE_X, "frames": frames}))
+    cams = read_pose_file(tmp_path / "transforms.json", default_size=(16, 16))
+    assert len(cams) == 2 and math.isclose(cams[0].fx, 8 / math.tan(CAMERA_ANGLE_X / 2), rel_tol=1e-6)
+    for cam, viewmat in zip(cams, viewmats):
+        assert torch.allclose(cam.viewmat.double(), viewmat.double(), atol=1e-5)
+
+
+def test_plot_only_draws_every_method_folder(tmp_path):
+    runs = tmp_path / "runs"
+    for method, psnr in (("coverage", 20.0), ("lite_gs", 21.0)):
+        folder = runs / method / "seed0"
+        folder.mkdir(parents=True)
+        rounds = [{"views": 3, "test_psnr": psnr}, {"views": 5, "test_psnr": psnr + 1}]
+        (folder / "loop.json").write_text(json.dumps({"method": method, "seed": 0, "rounds": rounds}))
+    (runs / "builtin_r32").mkdir()  # the shared ground-truth scene: not a method
+    png = tmp_path / "plot" / "psnr.png"
+
+    args = type("Args", (), {"plot": str(runs), "png": str(png), "output": str(tmp_path / "unused")})()
+    run_capture_loop(args)
+    assert png.is_file() and png.stat().st_size > 0
+    assert not (tmp_path / "unused").exists()
+
+
+@pytest.mark.slow
+def test_the_cli_runs_one_round(tmp_path):
+    out = tmp_path / "loop"
+    r = run_cli(str(ROOT / "scripts" / "capture_loop.py"), "--methods", "coverage", "--seeds", "0", "-o", str(out),
+                "--resolution", "16", "--num_test", "2", "--budget", "5", "-k", "2", "--candidates", "6",
+                "--iters_per_view", "10", "--max_gaussians", "500", "--png", str(tmp_path / "psnr.png"), timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    loop = json.loads((out / "coverage" / "seed0" / "loop.json").read_text())
+    assert [r["views"] for r in loop["rounds"]] == [3, 5]
+    assert loop["settings"]["plot"] is None and loop["settings"]["budget"] == 5
+    assert (out / "coverage" / "seed0" / "recommend_03" / "recommendations.json").is_file()
+    assert (tmp_path / "psnr.png").is_file()

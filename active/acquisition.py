@@ -32,7 +32,7 @@ class FisherSettings:
     delta_rel: float = 1e-6
     delta_abs: float = 1e-8
     param_groups: str = "default"
-    mode: str = "cached"  # "cached" falls back to streaming when the cache would exceed `cache_mb`
+    mode: str = "cached"  # "cached" keeps what fits `cache_mb` (streams when one view does not)
     cache_mb: int = 0  # 0: a quarter of the available memory
 
     @classmethod

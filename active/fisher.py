@@ -30,8 +30,10 @@ H_v,i = R_i R_i^T and a gain or commit touches the visible blocks only. Factors 
 LQ) and stored packed, 90 of 126 entries, as float32 (`FACTOR_STORAGE`; arithmetic stays float64). Modes: "cached"
 keeps each candidate's factors for the stage (an oracle is then a log-det update); "streaming" keeps nothing and recomputes a
 view's factors at every oracle (memory-lean). When the cache estimate (the training views' visible counts times the
-candidates) exceeds the memory budget, one view alone does not fit it, or the device runs out of memory while
-caching, cached mode falls back to streaming and says so once.
+candidates) exceeds the memory budget, the cache keeps the views it can, evicting the one with the lowest selector
+hint first (a lazy greedy's upper bound; least recently used without hints), and says so once. When one view alone
+does not fit the budget, or the device runs out of memory while caching, cached mode falls back to streaming and
+says so once.
 """
 from __future__ import annotations
 
@@ -236,11 +238,21 @@ def _projection_jacobian(gaussians: GaussianModel, camera: Camera, param_groups:
                                param_groups=param_groups, backend=backend).double()
 
 
+EVICTION_POLICIES = ("priority", "lru")  # FisherViewBlocks.eviction
+
+
 @dataclass
 class FisherViewBlocks:
-    """Per-view Fisher information of one model: computed on demand, kept in an LRU cache bounded in bytes (cached
-    mode) or not (streaming). Candidates come as `ViewFactors` stored in `FACTOR_STORAGE`; with `diagonal` set it
-    supplies the blocks' diagonals instead ([N, P], `fisher_view_diagonals`)."""
+    """Per-view Fisher information of one model: computed on demand, kept in a cache bounded in bytes (cached mode)
+    or not (streaming). Candidates come as `ViewFactors` stored in `FACTOR_STORAGE`; with `diagonal` set it supplies
+    the blocks' diagonals instead ([N, P], `fisher_view_diagonals`).
+
+    Eviction when the cached views exceed `cache_bytes` (`eviction`): "priority" (default) evicts the cached view
+    with the lowest priority first, the priorities being the selector's hints (`set_priority(view, bound)`: a lazy
+    greedy's cached upper bound, -inf once the view is chosen; a view never hinted counts as -inf), ties and a stage
+    without any hint in least-recently-used order; "lru" ignores the hints. The view just requested (the lazy
+    greedy's heap top) is never evicted for its own sake.
+    """
 
     gaussians: GaussianModel
     cameras: list[Camera]
@@ -252,11 +264,23 @@ class FisherViewBlocks:
     cache_bytes: int
     diagonal: bool = False  # diagonals [N, P] instead of factors
     reference: bool = False  # with `diagonal`: FisherRF's code's diagonals (`fisher_view_diagonals_reference`)
+    eviction: str = "priority"  # "priority" (the selector's hints, LRU without them) or "lru"
     views_computed: int = 0  # distinct views whose blocks were computed (candidates; prior views not counted)
+    fisher_passes: int = 0  # candidate views' blocks computed, recomputations included (cache misses)
     fisher_seconds: float = 0.0  # time spent computing blocks, prior included
-    _cache: "OrderedDict[int, ViewFactors | torch.Tensor]" = field(default_factory=OrderedDict)
+    _cache: "OrderedDict[int, ViewFactors | torch.Tensor]" = field(default_factory=OrderedDict)  # oldest use first
     _cached_bytes: int = 0
     _seen: set = field(default_factory=set)
+    _priority: dict = field(default_factory=dict)  # view id -> the selector's last hint
+
+    def __post_init__(self) -> None:
+        if self.eviction not in EVICTION_POLICIES:
+            raise ValueError(f"eviction must be one of {EVICTION_POLICIES}, got {self.eviction!r}")
+
+    def set_priority(self, view_id: int, bound: float) -> None:
+        """A selector's hint: how likely `view_id` is to be asked for again (a lazy greedy's upper bound on its gain;
+        -inf: never again). Under "priority" eviction the lowest is evicted first."""
+        self._priority[view_id] = float(bound)
 
     def compute(self, view_id: int, dtype: torch.dtype = torch.float64) -> ViewFactors | torch.Tensor:
         """The factors (in `dtype`, computed in float64) or diagonals [N, P] of `cameras[view_id]`, timed, never
@@ -297,6 +321,7 @@ class FisherViewBlocks:
                 raise
             self.use_streaming(f"out of device memory with {len(self._cache)} views cached")
             blocks = self.compute(view_id, FACTOR_STORAGE)  # what the cache keeps, written directly
+        self.fisher_passes += 1
         if view_id not in self._seen:
             self._seen.add(view_id)
             self.views_computed += 1
@@ -309,8 +334,16 @@ class FisherViewBlocks:
             self._cache[view_id] = blocks
             self._cached_bytes += size
             while len(self._cache) > 1 and self._cached_bytes > self.cache_bytes:
-                self._cached_bytes -= nbytes(self._cache.popitem(last=False)[1])
+                self._cached_bytes -= nbytes(self._cache.pop(self._victim(view_id)))
         return blocks
+
+    def _victim(self, keep: int) -> int:
+        """The cached view to evict, never `keep` (the view just added): the lowest hinted priority (the oldest use
+        among equals) under "priority" eviction once any hint came, else the least recently used."""
+        if self.eviction == "lru" or not self._priority:
+            return next(iter(self._cache))  # `keep` was added last
+        low = -float("inf")
+        return min((v for v in self._cache if v != keep), key=lambda v: self._priority.get(v, low))  # first minimum
 
 
 def nbytes(blocks: ViewFactors | torch.Tensor) -> int:
@@ -329,8 +362,17 @@ class _ViewStatistics:
         return self.blocks.views_computed
 
     @property
+    def fisher_passes(self) -> int:
+        return self.blocks.fisher_passes
+
+    @property
     def fisher_seconds(self) -> float:
         return self.blocks.fisher_seconds
+
+    def set_priority(self, view_id: int, bound: float) -> None:
+        """A selector's optional hint for the cache (`FisherViewBlocks.set_priority`): the view's current upper bound,
+        -inf once chosen. Selections do not depend on it."""
+        self.blocks.set_priority(view_id, bound)
 
 
 class FisherOracle(_ViewStatistics, BlockGainOracle):
@@ -438,8 +480,9 @@ def summed_views(compute: Callable[[int], torch.Tensor], views: list[int]) -> to
 
 
 def _prior(source: FisherViewBlocks, train_views: list[int], num_views: int) -> torch.Tensor:
-    """The sum of the training views' blocks (or diagonals); switches `source` to streaming when the candidates'
-    cache would exceed its budget (estimated from the training views' stored sizes). [N, P, P] or [N, P]"""
+    """The sum of the training views' blocks (or diagonals); switches `source` to streaming when one view would
+    exceed the cache budget, and says once that the cache will hold only part of the candidates when all of them
+    would (estimated from the training views' stored sizes). [N, P, P] or [N, P]"""
     sizes = []
 
     def dense_view(v: int) -> torch.Tensor:  # a training view's blocks (factors scattered to dense) or diagonals
@@ -453,7 +496,9 @@ def _prior(source: FisherViewBlocks, train_views: list[int], num_views: int) -> 
     if not source.streaming and max(sizes) > source.cache_bytes:
         source.use_streaming(f"one view's Fisher information needs about {max(sizes) / 2**20:.1f} MB, more than the "
                              f"cache budget of {source.cache_bytes / 2**20:.1f} MB (--fisher_cache_mb)")
-    elif not source.streaming and estimate > source.cache_bytes:
-        source.use_streaming(f"the Fisher cache would need {estimate / 2**20:.0f} MB for {num_candidates} "
-                             f"candidate views (budget {source.cache_bytes / 2**20:.0f} MB, --fisher_cache_mb)")
+    elif not source.streaming and estimate > source.cache_bytes:  # a partial cache: never more passes than streaming
+        log.warning("the Fisher cache would need %.0f MB for %d candidate views (budget %.0f MB, --fisher_cache_mb): "
+                    "caching part of them, evicting %s first", estimate / 2**20, num_candidates,
+                    source.cache_bytes / 2**20,
+                    "the lowest upper bound" if source.eviction == "priority" else "the least recently used")
     return prior

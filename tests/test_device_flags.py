@@ -17,15 +17,15 @@ def test_device_cuda_without_cuda_is_one_error_line(tiny_scene, tmp_path):
     assert "Traceback" not in r.stderr and not (tmp_path / "m").exists()
 
 
-def test_tiny_fisher_cache_budget_falls_back_to_streaming_with_one_message(tiny_scene, tmp_path):
-    """12 candidates x 400 Gaussians x 14 x 14 float64 blocks need about 7 MB per stage; 1 MB cannot cache them, so
-    the oracle streams (same selection as --fisher_mode streaming) and says so once per acquisition step."""
+def test_tiny_fisher_cache_budget_caches_part_of_the_pool_with_one_message(tiny_scene, tmp_path):
+    """The candidates' factors need more than 1 MB per stage and one view less: the cache keeps part of the pool
+    (same selection as --fisher_mode streaming) and says so once per acquisition step."""
     cached = run_cli("train.py", "-s", str(tiny_scene), "-m", str(tmp_path / "cached"), "--method", "pop_gs",
                      "--fisher_cache_mb", "1", *dc.ACTIVE_ARGS)
     assert cached.returncode == 0, cached.stderr[-2000:]
-    messages = [line for line in cached.stderr.splitlines() if "switching the Fisher oracle to streaming" in line]
+    messages = [line for line in cached.stderr.splitlines() if "caching part of them" in line]
     assert len(messages) == 2 and "--fisher_cache_mb" in messages[0] and "budget 1 MB" in messages[0]
-    assert "Traceback" not in cached.stderr
+    assert "switching the Fisher oracle to streaming" not in cached.stderr and "Traceback" not in cached.stderr
     streaming = dc.active_selection(tiny_scene, tmp_path / "streaming", "cpu", extra=("--fisher_mode", "streaming"))
     fallback = (tmp_path / "cached" / "selection.json").read_text()
     assert [s["selected"] for s in json.loads(fallback)["stages"]] == [s["selected"] for s in streaming["stages"]]

@@ -177,7 +177,8 @@ def test_registry_refuses_duplicates_unknown_names_and_options():
         registry._SELECTORS.pop("_test_dummy", None)
 
 
-@pytest.mark.parametrize("method,options", [("pop_gs", {}), ("lite_gs", {"eps": 0.1}), ("ssg", {"eps": 0.1})])
+@pytest.mark.parametrize("method,options", [("pop_gs", {}), ("lazy_pop", {}), ("lite_gs", {"eps": 0.1}),
+                                            ("ssg", {"eps": 0.1})])
 def test_streaming_commits_cost_no_fisher_recompute(method, options):
     """Each pick commits its best fresh gain, whose whitened blocks the oracle kept: in streaming mode the Fisher
     blocks are computed exactly once per evaluated oracle, and the result equals committing recomputed blocks."""
@@ -220,10 +221,11 @@ def select_constant(method: str, ids: list[int], k: int, seed: int = 0, **option
     return build_selector(method, **options).select(ctx, k), oracle
 
 
-@pytest.mark.parametrize("method", ["pop_gs", "lite_gs", "ssg"])
+@pytest.mark.parametrize("method", ["pop_gs", "lazy_pop", "lite_gs", "ssg"])
 def test_exact_ties_go_to_the_lowest_view_id(method):
     ids = [41, 7, 99, 3, 20, 8]  # unsorted on purpose
-    sel, oracle = select_constant(method, ids, 3, eps=1e-9) if method != "pop_gs" else select_constant(method, ids, 3)
+    options = {"eps": 1e-9} if method in ("lite_gs", "ssg") else {}
+    sel, oracle = select_constant(method, ids, 3, **options)
     assert sel.ids == [3, 7, 8] and sel.gains == [1.0, 1.0, 1.0]
     assert oracle.committed == sel.ids
 
@@ -272,3 +274,86 @@ def test_ssg_picks_all_come_from_its_one_subset():
     assert set(sel.ids) <= subset and set().union(*oracle.picks) <= subset
     assert sel.ids == sorted(subset)[:4]  # ties to the lowest id within the subset
     assert sel.conservative == sum(p - j for j in range(4))
+
+
+def tied_problem(m=14, n=4, p=2, seed=0):
+    """Exact ties everywhere: one prior block shared by all `n` Gaussians, and every view sees one Gaussian with one
+    of two block types (some views exact duplicates). Gains of the same type on untouched Gaussians are bitwise
+    equal, before and after commits elsewhere, so cached bounds often equal the best fresh gain exactly. [m + 1, n,
+    p, p]"""
+    g = torch.Generator().manual_seed(seed)
+    types = random_blocks(3, 1, p, seed=seed)[:, 0]  # [3, p, p]: the prior, two view types
+    blocks = torch.zeros(m + 1, n, p, p, dtype=torch.float64)
+    blocks[0] = types[0]
+    gaussian = torch.randint(n, (m,), generator=g)
+    kind = torch.randint(2, (m,), generator=g)
+    for v in range(m):
+        blocks[v + 1, gaussian[v]] = 0.5 * types[1 + kind[v]]
+    return blocks
+
+
+def lazy_pop_instances():
+    """(blocks, k) over many random PSD instances: interacting, spread, rank-deficient, sparse ids, exact ties."""
+    for seed in range(6):
+        yield problem(m=12, seed=200 + seed), 3 + seed % 4
+        yield spread_problem(m=15, n=4, p=3, seed=300 + seed), 6
+        rank_deficient = random_blocks(19, 5, 3, seed=400 + seed, rank=1)  # one rank-1 block per Gaussian and view
+        rank_deficient[1:] *= 0.5
+        yield rank_deficient, 5
+        yield tied_problem(seed=500 + seed), 6
+        yield tied_problem(m=10, n=2, seed=600 + seed), 10  # every view chosen: ties until the end
+
+
+def test_lazy_pop_makes_pop_gs_picks_with_fewer_evaluations():
+    evaluated = {"pop_gs": 0, "lazy_pop": 0}
+    for i, (blocks, k) in enumerate(lazy_pop_instances()):
+        m = blocks.shape[0] - 1
+        ids = None if i % 2 else list(range(5 * m - 2, 0, -5))  # sparse, descending: the lowest id is view m - 1
+        reference, pop_oracle = run("pop_gs", blocks, k, ids=ids)
+        lazy, lazy_oracle = run("lazy_pop", blocks, k, ids=ids)
+        assert lazy.ids == reference.ids, i  # the same views in the same order, exact ties included
+        assert lazy.gains == reference.gains, i  # each winner's gain is computed in the same state: bitwise equal
+        assert lazy_oracle.evaluated <= pop_oracle.evaluated == reference.conservative == lazy.conservative
+        assert lazy_oracle.information.rho() == pytest.approx(pop_oracle.information.rho(), rel=1e-12)
+        evaluated["pop_gs"] += pop_oracle.evaluated
+        evaluated["lazy_pop"] += lazy_oracle.evaluated
+    assert evaluated["lazy_pop"] < 0.8 * evaluated["pop_gs"], evaluated
+
+
+def test_lazy_pop_typical_instance_counts():
+    # M = 12, K = 3: the first pick evaluates all 12, the later ones only the candidates whose bound could still win
+    sel, oracle = run("lazy_pop", problem(seed=7), 3)
+    assert sel.conservative == 12 + 11 + 10
+    assert 12 + 2 <= oracle.evaluated < 12 + 11 + 10
+
+
+class CoverageOracle:
+    """A weighted coverage function with integer weights: exactly monotone submodular, gains exact integers, so
+    ties (fresh and stale) are everywhere; `universe[v]` is the set of elements view v covers."""
+
+    def __init__(self, universe: dict[int, set[int]], weights: list[int]):
+        self.universe, self.weights, self.covered, self.evaluated = universe, weights, set(), 0
+
+    def gain(self, view_id: int) -> float:
+        self.evaluated += 1
+        return float(sum(self.weights[e] for e in self.universe[view_id] - self.covered))
+
+    def commit(self, view_id: int) -> None:
+        self.covered |= self.universe[view_id]
+
+
+def test_lazy_pop_equals_pop_gs_on_exactly_tied_submodular_functions():
+    for seed in range(40):
+        g = torch.Generator().manual_seed(seed)
+        m, elements = 6 + seed % 9, 5 + seed % 7
+        ids = sorted(torch.randperm(60, generator=g)[:m].tolist())
+        universe = {v: set(torch.nonzero(torch.rand(elements, generator=g) < 0.35).flatten().tolist()) for v in ids}
+        weights = torch.randint(1, 3, (elements,), generator=g).tolist()
+        picks = {}
+        for method in ("pop_gs", "lazy_pop"):
+            oracle = CoverageOracle(universe, weights)
+            ctx = SelectionContext(list(reversed(ids)), oracle, torch.Generator().manual_seed(0), stage=0)
+            sel = build_selector(method).select(ctx, m)
+            picks[method] = (sel.ids, sel.gains)
+            assert oracle.evaluated <= sel.conservative == sum(m - j for j in range(m))
+        assert picks["lazy_pop"] == picks["pop_gs"], seed

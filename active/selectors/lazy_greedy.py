@@ -1,4 +1,5 @@
-"""Lazy greedy shared by lite_gs and ssg: a max-priority queue over cached (upper-bound) gains, and the pick loop."""
+"""Lazy greedy shared by lite_gs, ssg and lazy_pop: a max-priority queue over cached (upper-bound) gains, the pick
+loop, and the optional priority hints to a Fisher cache."""
 from __future__ import annotations
 
 import heapq
@@ -6,6 +7,12 @@ import math
 from typing import Callable
 
 from active.base import GainOracle, Selection
+
+
+def priority_hint(oracle: GainOracle) -> Callable[[int, float], None]:
+    """The oracle's optional `set_priority(view, bound)` (a Fisher cache evicting the lowest bound first), or a
+    no-op. Hints never change a selection, only which views' Fisher blocks stay cached."""
+    return getattr(oracle, "set_priority", None) or (lambda view, bound: None)
 
 
 def lazy_greedy_pick(members: list[int], cached: dict[int, float], oracle: GainOracle) -> tuple[int, float]:
@@ -21,6 +28,7 @@ def lazy_greedy_pick(members: list[int], cached: dict[int, float], oracle: GainO
     heap = [(-cached[v], v) for v in members]
     heapq.heapify(heap)
     fresh: set[int] = set()
+    hint = priority_hint(oracle)
     while True:
         key, view = heapq.heappop(heap)
         if view in fresh:
@@ -28,6 +36,7 @@ def lazy_greedy_pick(members: list[int], cached: dict[int, float], oracle: GainO
         gain = oracle.gain(view)
         fresh.add(view)
         cached[view] = gain
+        hint(view, gain)  # the new upper bound: a Fisher cache keeps the highest
         if not heap or (-gain, view) < heap[0]:  # strictly ahead of the next entry in heap order
             return view, gain
         heapq.heappush(heap, (-gain, view))
@@ -43,11 +52,13 @@ def lazy_greedy_select(pool: list[int], k: int, oracle: GainOracle,
     pool = list(pool)
     cached = {v: math.inf for v in pool}
     ids, gains, conservative = [], [], 0
+    hint = priority_hint(oracle)
     for j in range(k):
         members = members_for_pick(j, pool)
         conservative += len(members)
         view, gain = lazy_greedy_pick(members, cached, oracle)
         oracle.commit(view)
+        hint(view, -math.inf)  # chosen: never asked for again this stage
         pool.remove(view)
         ids.append(view)
         gains.append(gain)

@@ -32,6 +32,7 @@ from scene.trained import TrainedModel, load_trained, recorded_train_views
 from utils.colormap import colorize_log, log_range, save_colorbar
 from utils.errors import run_cli
 from utils.image import save_image
+from utils.io import disk_write_error
 from utils.model_dir import render_dir
 
 
@@ -45,9 +46,28 @@ def render_set(out_dir: Path, cameras: list[Camera], gaussians: GaussianModel, b
     uncertainty/object_mask/NNNNN.png (255 where the ground truth or the render differs from the background)."""
     tmp = out_dir.with_name(out_dir.name + ".partial")
     shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        _render_into(tmp, cameras, gaussians, background, settings, quiet, uncertainty, object_mask,
+                     out_dir.parent.name)
+    except OSError as exc:  # a full disk or a permission error: one line, and no partial folder left behind
+        shutil.rmtree(tmp, ignore_errors=True)
+        if (err := disk_write_error(exc.filename or tmp, exc)) is not None:
+            raise err from None
+        raise
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    shutil.rmtree(out_dir, ignore_errors=True)
+    tmp.rename(out_dir)
+
+
+def _render_into(tmp: Path, cameras: list[Camera], gaussians: GaussianModel, background: torch.Tensor,
+                 settings: RasterSettings, quiet: bool, uncertainty: dict[str, torch.Tensor | None] | None,
+                 object_mask: bool, split: str) -> None:
+    """render_set's writing, into the temporary folder `tmp`."""
     uncertainty = uncertainty or {}
     maps: dict[str, list[np.ndarray]] = {kind: [] for kind in uncertainty}
-    for idx, cam in enumerate(tqdm(cameras, desc=f"rendering {out_dir.parent.name}", disable=quiet)):
+    for idx, cam in enumerate(tqdm(cameras, desc=f"rendering {split}", disable=quiet)):
         image = render(cam, gaussians, background, settings).image.clamp(0, 1)
         save_image(image, tmp / "renders" / f"{idx:05d}.png")
         save_image(cam.image, tmp / "gt" / f"{idx:05d}.png")
@@ -64,8 +84,6 @@ def render_set(out_dir: Path, cameras: list[Camera], gaussians: GaussianModel, b
             np.save(folder / f"{idx:05d}.npy", values.astype(np.float32))
             save_image(colorize_log(values, lo, hi), folder / f"{idx:05d}.png")
         save_colorbar(folder / "colorbar.png", lo, hi, f"{UNCERTAINTY_KINDS[kind]} (log10 scale)")
-    shutil.rmtree(out_dir, ignore_errors=True)
-    tmp.rename(out_dir)
 
 
 def kind_map(kind: str, camera: Camera, gaussians: GaussianModel, background: torch.Tensor,

@@ -8,6 +8,7 @@ import torch
 from plyfile import PlyData, PlyElement
 
 from utils.errors import UserError
+from utils.io import atomic_write
 
 MAX_PLY_SH_DEGREE = 3  # f_rest counts 0, 9, 24, 45
 
@@ -20,7 +21,8 @@ def ply_attribute_names(num_rest: int) -> list[str]:
 
 
 def save_ply(path: str | os.PathLike, params: dict[str, torch.Tensor]) -> None:
-    """Write raw parameters as binary float32; normals are zero, opacity is a logit and scales are logs.
+    """Write raw parameters as binary float32, atomically (`utils.io.atomic_write`: a full disk is one `UserError`
+    line and leaves an old file unchanged); normals are zero, opacity is a logit and scales are logs.
 
     f_rest is stored channel-major ([N, 3, K-1] flattened) as 3DGS does, so common splat viewers read the file.
     Args:
@@ -35,8 +37,8 @@ def save_ply(path: str | os.PathLike, params: dict[str, torch.Tensor]) -> None:
     data = np.empty(n, dtype=[(name, "f4") for name in names])
     for i, name in enumerate(names):
         data[name] = columns[:, i]
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    PlyData([PlyElement.describe(data, "vertex")]).write(str(path))
+    ply = PlyData([PlyElement.describe(data, "vertex")])
+    atomic_write(path, ply.write)  # a temporary file renamed into place: never a truncated PLY
 
 
 def load_ply(path: str | os.PathLike) -> tuple[dict[str, torch.Tensor], int]:

@@ -19,6 +19,7 @@ import argparse
 import logging
 import os
 
+from utils.dir_lock import WAYS_OUT, writer_lock
 from utils.errors import run_cli
 from utils.io import write_json
 from utils.lpips_loader import VARIANTS, default_weights_path, load_lpips
@@ -26,6 +27,7 @@ from utils.metrics_core import (REGIONS, UNCERTAINTY_KINDS, Lpips, evaluate_view
                                 method_dirs, object_region, uncertainty_key, uncertainty_metric_names)
 from utils.model_dir import PER_VIEW, RESULTS
 from utils.uncertainty_metrics import AUSE_VARIANTS, parse_ause_variants
+
 
 
 def evaluate(model_dirs: list[str | os.PathLike], lpips_weights: str | os.PathLike | None = None,
@@ -53,13 +55,14 @@ def evaluate(model_dirs: list[str | os.PathLike], lpips_weights: str | os.PathLi
     summary: dict[str, dict] = {}
     for model_dir in found:
         results, per_view_all = {}, {}
-        for method_dir in method_dirs(model_dir):
-            per_view = evaluate_views(method_dir, lpips, device, quiet, ause_variants)
-            results[method_dir.name] = mean_metrics(per_view, lpips.variant if lpips else None,
-                                                    object_region(method_dir))
-            per_view_all[method_dir.name] = per_view
-        write_json(model_dir / RESULTS, results)
-        write_json(model_dir / PER_VIEW, per_view_all)
+        with writer_lock(model_dir, WAYS_OUT["metrics"]):  # no render.py / train.py writing it meanwhile
+            for method_dir in method_dirs(model_dir):
+                per_view = evaluate_views(method_dir, lpips, device, quiet, ause_variants)
+                results[method_dir.name] = mean_metrics(per_view, lpips.variant if lpips else None,
+                                                        object_region(method_dir))
+                per_view_all[method_dir.name] = per_view
+            write_json(model_dir / RESULTS, results)
+            write_json(model_dir / PER_VIEW, per_view_all)
         summary[str(model_dir)] = {m: {**r, "num_views": len(per_view_all[m]["PSNR"])} for m, r in results.items()}
     return summary
 
@@ -124,7 +127,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.report:
         from reports import write_run_report
         for model_dir in summary:
-            print(f"report: {write_run_report(model_dir)}")
+            with writer_lock(model_dir, WAYS_OUT["metrics"]):
+                print(f"report: {write_run_report(model_dir)}")
 
 
 if __name__ == "__main__":

@@ -24,7 +24,9 @@ from active.registry import selector_options_dataclass
 from arguments import add_config_args, config_from_args, config_to_dict
 from recommender.outputs import check_output_dir, summary_lines, write_outputs
 from recommender.pipeline import candidate_cameras, load_model, make_pool, recommend
+from utils.dir_lock import WAYS_OUT, writer_lock
 from utils.errors import UserError, run_cli
+from utils.model_dir import folder_lock_file
 
 SelectorOptions = selector_options_dataclass()
 
@@ -82,6 +84,12 @@ def main() -> None:
     model_path = Path(args.model)
     out = check_output_dir(args.output or (model_path / "recommend" if model_path.is_dir()
                                            else model_path.with_name(model_path.stem + "_recommend")))
+    with writer_lock(out, WAYS_OUT["recommend"], folder_lock_file(out)):  # beside it: the folder is replaced whole
+        _recommend(args, selector, model_path, out, t0)
+
+
+def _recommend(args: argparse.Namespace, selector, model_path: Path, out: Path, t0: float) -> None:
+    """Load the model, rank the candidates, write the output folder `out` and print the summary."""
     model = load_model(model_path, args.captured, iteration=args.iteration, device=args.device,
                        white_background=args.white_background)
     if args.fisher_mode or args.fisher_cache_mb is not None:

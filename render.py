@@ -13,6 +13,10 @@ the ground truth or the render differs from the background (metrics.py's "object
 """
 from __future__ import annotations
 
+if __name__ == "__main__":  # a second writer into a directory being written is refused before the slow imports
+    from utils.dir_lock import WAYS_OUT, refuse_if_locked
+    refuse_if_locked(("-m", "--model_path"), WAYS_OUT["render"])
+
 import argparse
 import shutil
 from dataclasses import replace
@@ -32,8 +36,10 @@ from scene.trained import TrainedModel, load_trained, recorded_train_views
 from utils.colormap import colorize_log, log_range, save_colorbar
 from utils.errors import run_cli
 from utils.image import save_image
+from utils.dir_lock import WAYS_OUT, writer_lock
 from utils.io import disk_write_error
 from utils.model_dir import render_dir
+
 
 
 @torch.no_grad()
@@ -127,7 +133,15 @@ def render_model(model_path: str | Path, iteration: int = -1, skip_train: bool =
                  source_path: str | None = None, quiet: bool = False, raster_backend: str | None = None,
                  uncertainty: bool = False, uncertainty_kinds: tuple[str, ...] = tuple(UNCERTAINTY_KINDS)) -> int:
     """Render one model directory (rasterizer backend: `raster_backend`, else the run's; with `uncertainty`, its
-    uncertainty maps of `uncertainty_kinds` too); returns the iteration rendered."""
+    uncertainty maps of `uncertainty_kinds` too), holding its writer lock; returns the iteration rendered."""
+    with writer_lock(model_path, WAYS_OUT["render"], create=False):  # a missing directory: load_trained says so
+        return _render_model(model_path, iteration, skip_train, skip_test, source_path, quiet, raster_backend,
+                             uncertainty, uncertainty_kinds)
+
+
+def _render_model(model_path: str | Path, iteration: int, skip_train: bool, skip_test: bool, source_path: str | None,
+                  quiet: bool, raster_backend: str | None, uncertainty: bool,
+                  uncertainty_kinds: tuple[str, ...]) -> int:
     trained = load_trained(model_path, iteration, source_path)
     if raster_backend:
         trained = replace(trained, settings=replace(trained.settings, backend=raster_backend))

@@ -12,9 +12,14 @@ from __future__ import annotations
 import argparse
 import logging
 import time
+from contextlib import nullcontext
+from pathlib import Path
 
 from reports import write_grid_report, write_recommendation_report, write_run_report
+from utils.dir_lock import WAYS_OUT, writer_lock
 from utils.errors import run_cli
+from utils.model_dir import folder_lock_file
+
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -30,12 +35,19 @@ def main(argv: list[str] | None = None) -> None:
                         help="--grid: link to the runs' existing report.html instead of rewriting them")
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
-    if args.model_path:
-        path = write_run_report(args.model_path, args.out)
-    elif args.grid:
-        path = write_grid_report(args.grid, args.out, run_reports=not args.no_run_reports)
-    else:
-        path = write_recommendation_report(args.recommendation, args.out)
+    folder = args.model_path or args.grid or args.recommendation
+    # report.html goes into the folder: no other writer meanwhile (recommend.py replaces its folder whole, so its
+    # lock lies beside it); with -o the folder is only read
+    lock = (nullcontext() if args.out is not None else
+            writer_lock(folder, WAYS_OUT["report"], folder_lock_file(Path(folder)) if args.recommendation else None,
+                        create=False))
+    with lock:
+        if args.model_path:
+            path = write_run_report(args.model_path, args.out)
+        elif args.grid:
+            path = write_grid_report(args.grid, args.out, run_reports=not args.no_run_reports)
+        else:
+            path = write_recommendation_report(args.recommendation, args.out)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB in {time.perf_counter() - t0:.1f} s)")
 
 

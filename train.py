@@ -11,6 +11,10 @@ The engine is `training.engine` (this file parses the flags and reports bad inpu
 """
 from __future__ import annotations
 
+if __name__ == "__main__":  # a second writer into a directory being written is refused before the slow imports
+    from utils.dir_lock import WAYS_OUT, refuse_if_locked
+    refuse_if_locked(("-m", "--model_path"), WAYS_OUT["train"])
+
 import logging
 
 import torch

@@ -9,6 +9,7 @@
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import random
 import time
@@ -32,6 +33,7 @@ from training.optim import PositionLRSchedule
 from training.state import TrainState, capture_state, fresh_state, restore_state
 from training.step import next_view, test_psnr, training_step
 from training.time_estimate import RunTimeEstimator
+from utils import dir_lock
 from utils.checkpoint import RunDirectory
 from utils.io import write_json
 from utils.model_dir import INPUT_PLY, SELECTION
@@ -74,10 +76,30 @@ class Run:
     eta: RunTimeEstimator | None = None  # the one-line wall-time estimate after the first iterations
     progress_written: float = field(default_factory=time.monotonic)  # when run_status.json last got the progress
     sessions: list[dict[str, Any]] = field(default_factory=list)  # provenance of each start/resume (selection.json)
+    lock: contextlib.ExitStack | None = None  # the model directory's writer lock (utils.dir_lock), until `close_run`
 
 
 def open_run(cfg: TrainConfig, model_path: str) -> Run:
-    """Load the scene and resume from the newest checkpoint of `model_path`, or start the run there."""
+    """Take `model_path`'s writer lock, load the scene and resume from the newest checkpoint of `model_path`, or
+    start the run there. The lock is held until `close_run` (or the process ends)."""
+    lock = dir_lock.hold(model_path, dir_lock.WAYS_OUT["train"])
+    try:
+        run = _open_run(cfg, model_path)
+    except BaseException:
+        lock.close()
+        raise
+    run.lock = lock
+    return run
+
+
+def close_run(run: Run) -> None:
+    """Release the run's writer lock."""
+    if run.lock is not None:
+        run.lock.close()
+        run.lock = None
+
+
+def _open_run(cfg: TrainConfig, model_path: str) -> Run:
     run_dir = RunDirectory(model_path)
     if cfg.run.overwrite:
         run_dir.clear()
@@ -190,16 +212,19 @@ def training(cfg: TrainConfig) -> Path:
               "pass --overwrite to train it again")
         return Path(model_path)
     run = open_run(cfg, model_path)
-    run.eta = RunTimeEstimator.for_run(run)
-    progress = tqdm(total=run.plan.total_iterations, initial=run.state.iteration, disable=cfg.run.quiet,
-                    desc="training", dynamic_ncols=True)
-    while True:
-        train_stage(run, progress)
-        if run.state.stage >= len(run.plan.adds):
-            break
-        acquire(run, progress)
-    progress.close()
-    finish(run)
+    try:
+        run.eta = RunTimeEstimator.for_run(run)
+        progress = tqdm(total=run.plan.total_iterations, initial=run.state.iteration, disable=cfg.run.quiet,
+                        desc="training", dynamic_ncols=True)
+        while True:
+            train_stage(run, progress)
+            if run.state.stage >= len(run.plan.adds):
+                break
+            acquire(run, progress)
+        progress.close()
+        finish(run)
+    finally:
+        close_run(run)
     return Path(model_path)
 
 

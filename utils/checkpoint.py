@@ -13,7 +13,7 @@ import torch
 
 from utils.errors import UserError
 from utils.io import save_torch, write_json
-from utils.model_dir import CFG_ARGS, CHECKPOINTS_DIR, RUN_STATUS, checkpoint_file
+from utils.model_dir import CFG_ARGS, CHECKPOINTS_DIR, LOCK_FILE, RUN_STATUS, checkpoint_file
 
 CHECKPOINT_FORMAT_VERSION = 1
 _CKPT_RE = re.compile(r"^chkpnt_(\d+)\.pt$")
@@ -43,13 +43,21 @@ class RunDirectory:
         return bool(status) and status.get("status") == "complete"
 
     def clear(self) -> None:
-        """Delete a previous run in this directory (only if it looks like one of ours)."""
-        if not self.path.exists():
+        """Delete a previous run in this directory (only if it looks like one of ours), keeping the writer lock
+        (`LOCK_FILE`) that the caller holds."""
+        if not self.path.is_dir():
+            return
+        entries = [p for p in self.path.iterdir() if p.name != LOCK_FILE]
+        if not entries:
             return
         if not ((self.path / CFG_ARGS).exists() or self.status_file.exists()):
             raise UserError(f"--overwrite refused: {self.path} is not a model directory of this project "
                             "(no cfg_args / run_status.json); pick another -m/--model_path")
-        shutil.rmtree(self.path)
+        for entry in entries:
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
 
     def start(self, config: dict[str, Any]) -> None:
         """Create the directory and mark the run as running; fails with one line if it is not writable."""

@@ -9,6 +9,7 @@
     <model>/checkpoints/chkpnt_NNNNNNN.pt             the resumable checkpoints
     <model>/{train,test}/ours_N/                      render.py's images (renders/, gt/)
     <model>/results.json, per_view.json               metrics.py's tables
+    <model>/.lock                                     while a writer runs: its pid and command (utils/dir_lock.py)
 """
 from __future__ import annotations
 
@@ -25,7 +26,14 @@ PER_VIEW = "per_view.json"
 POINT_CLOUD_DIR = "point_cloud"
 CHECKPOINTS_DIR = "checkpoints"
 POINT_CLOUD_PLY = "point_cloud.ply"  # in point_cloud/iteration_N/
+LOCK_FILE = ".lock"  # the writer lock of a model directory (utils/dir_lock.py); deleted when its writer ends
 METHOD_PATTERN = re.compile(r"ours_(\d+)")  # `method_name`: render folders and results.json keys
+
+
+def folder_lock_file(folder: Path) -> Path:
+    """The writer lock of a folder that is replaced whole (recommend.py's output): `.NAME.lock` beside it."""
+    folder = Path(folder)
+    return folder.parent / f".{folder.name}{LOCK_FILE}"
 
 
 def iteration_dir_name(iteration: int) -> str:

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from active import build_selector
-from active.acquisition import FisherSettings, select_views
+from active.acquisition import FisherSettings, run_selection
 from active.base import SelectionContext
 from active.fisher import FisherOracle, FisherViewBlocks
 from scene.cameras import Camera
@@ -82,7 +82,7 @@ def scene():
 
 
 def acquire(scene, method, k, eviction, budget, monkeypatch, options=None):
-    """One acquisition step through `select_views` (the selector sees the oracle through its recorder) with a cache
+    """One acquisition step through `run_selection` (the selector sees the oracle through its recorder) with a cache
     budget of `budget` bytes; returns (selection, oracle)."""
     gaussians, cams, train, candidates, _ = scene
     built = []
@@ -94,7 +94,7 @@ def acquire(scene, method, k, eviction, budget, monkeypatch, options=None):
 
     monkeypatch.setattr("active.acquisition.build_oracle", build)
     monkeypatch.setattr("active.fisher._cache_budget", lambda cache_mb: budget)
-    step = select_views(build_selector(method, **(options or {})), gaussians, cams, train, candidates, k, BG, SETTINGS,
+    step = run_selection(build_selector(method, **(options or {})), gaussians, cams, train, candidates, k, BG, SETTINGS,
                         fisher=FisherSettings())
     assert step.evaluated == built[0].evaluated
     return step.selection, built[0]

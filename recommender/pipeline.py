@@ -25,6 +25,7 @@ from active.acquisition import Acquisition, FisherSettings, run_selection
 from active.base import Selector
 from arguments import ModelConfig, PipelineConfig
 from gaussian_renderer import RasterSettings, project_gaussians
+from recommender.advice import selection_advice
 from recommender.candidates import generate, parse_spec
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
@@ -204,6 +205,9 @@ def recommend(model: LoadedModel, pool: Pool, selector: Selector, k: int, *, see
     for v in unseen[:k_taken - len(picks)]:
         picks.append(v)
         gains.append(0.0)
+    advice = selection_advice(selector, len(pool.train_ids))
+    if advice is not None:
+        notes.append(advice)
     for note in notes:
         log.warning(note)
     return Recommendation(pool, selector, k, picks, gains, step, visible, seed, notes, time.perf_counter() - t0)

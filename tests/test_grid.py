@@ -128,7 +128,7 @@ def test_slurm_dry_run_writes_the_sbatch_file(tmp_path):
     (["--setup", "setup9"], "setup1, setup2, setup3, setup4, ablation_ssg"),
     (["--setup", "setup1", "--scenes", "lego", "chair"], "scenes in"),
     (["--setup", "setup1", "--methods", "pop_gs", "no_such"],
-     "registered selectors: coverage, fisherrf, lazy_pop, lite_gs, pop_gs, random, ssg"),
+     "registered selectors: cover, coverage, fisherrf, lazy_pop, lite_gs, pop_gs, random, ssg"),
     (["--setup", "setup1", "--max_parallel", "0"], "--max_parallel must be an integer >= 1"),
     (["--setup", "setup1", "--seeds", "0"], "--seeds"),
     (["--setup", "setup1", "--eps", "1"], "--eps"),

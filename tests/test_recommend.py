@@ -71,7 +71,7 @@ def test_same_picks_as_train_py_and_no_image_is_read(tiny_scene, tmp_path):
     assert trained.scene is None and len(trained.train_cameras) == 14 and trained.record["dataset"]["num_test"] == 4
     out = tmp_path / "next"
     r = run_cli("recommend.py", "-m", str(model), "--iteration", "20", "--candidates", "unused", "-k", "3",
-                "--seed", "3", "-o", str(out), "--quiet")
+                "--method", "lite_gs", "--seed", "3", "-o", str(out), "--quiet")  # train.py's selector, not the default
     assert r.returncode == 0, r.stderr
     rec = json.loads((out / "recommendations.json").read_text())
     assert len(stage["selected"]) == 3 and [p["candidate"] for p in rec["picks"]] == stage["selected"]

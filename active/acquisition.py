@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from collections.abc import Mapping
 from typing import Any
 
 import torch
@@ -35,11 +36,17 @@ class FisherSettings:
     mode: str = "cached"  # "cached" keeps what fits `cache_mb` (streams when one view does not)
     cache_mb: int = 0  # 0: a quarter of the available memory
 
+    # ActiveConfig's (train.py's) name of each field, the one map between the two namings
+    ACTIVE_NAMES = {"sigma": "sigma", "delta_rel": "delta_rel", "delta_abs": "delta_abs",
+                    "param_groups": "fisher_params", "mode": "fisher_mode", "cache_mb": "fisher_cache_mb"}
+
     @classmethod
     def from_active(cls, active: Any) -> "FisherSettings":
-        """From an `arguments.ActiveConfig` (or anything with its field names)."""
-        return cls(active.sigma, active.delta_rel, active.delta_abs, active.fisher_params, active.fisher_mode,
-                   active.fisher_cache_mb)
+        """From an `arguments.ActiveConfig` (or anything with its field names), or from a mapping of them such as a
+        model directory's recorded config, where a missing name takes this class's default."""
+        if isinstance(active, Mapping):
+            return cls(**{f: active[a] for f, a in cls.ACTIVE_NAMES.items() if a in active})
+        return cls(**{f: getattr(active, a) for f, a in cls.ACTIVE_NAMES.items()})
 
 
 @dataclass

@@ -76,11 +76,7 @@ def _load_model_dir(path: Path, iteration: int, device: str) -> LoadedModel:
     trained = load_trained(path, iteration, device=device, cameras_only=True, sh_degree_as_trained=True)
     cameras, active = trained.train_cameras, trained.record.get("active", {})
     train_ids = recorded_train_views(path, trained.iteration, len(cameras), active.get("method", ""))
-    defaults = FisherSettings()
-    fisher = FisherSettings(active.get("sigma", defaults.sigma), active.get("delta_rel", defaults.delta_rel),
-                            active.get("delta_abs", defaults.delta_abs),
-                            active.get("fisher_params", defaults.param_groups),
-                            active.get("fisher_mode", defaults.mode), active.get("fisher_cache_mb", defaults.cache_mb))
+    fisher = FisherSettings.from_active(active)
     return LoadedModel(path, "model_dir", trained.gaussians, [cameras[v] for v in train_ids], trained.background,
                        trained.settings, fisher, trained.iteration, cameras, list(train_ids))
 

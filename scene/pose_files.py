@@ -2,8 +2,8 @@
 `camera_path.json` or a COLMAP model, read into image-less `Camera`s (OpenCV axes, pinhole).
 
 No image file is opened: a frame's `file_path` is ignored (and may be missing); a transforms file without `w`/`h`
-takes the size from `default_size`. Lens distortion is dropped (the cameras are pinholes). Every pose is checked:
-finite, with an orthonormal, right-handed rotation; a bad one is a `UserError` naming the file and the frame.
+takes the size from `default_size`. Lens distortion is dropped (the cameras are pinholes). Every pose is checked by
+`scene.pose_check.checked_c2w`, the rule train.py's readers use too.
 
     cameras = read_pose_file(Path("cameras.json"))          # format detected from the content
 """
@@ -18,33 +18,8 @@ import torch
 from scene import colmap_io
 from scene.cameras import Camera
 from scene.frames import GL_TO_CV
+from scene.pose_check import ORTHONORMAL_TOL, checked_c2w  # noqa: F401  (the one pose rule)
 from utils.errors import UserError
-
-ORTHONORMAL_TOL = 1e-3  # max |R^T R - I| accepted as a rotation
-
-
-def checked_c2w(matrix, where: str) -> torch.Tensor:
-    """A camera-to-world matrix (3x4 or 4x4 nested list or tensor) as float64 [4, 4], after the checks: numeric,
-    finite, rotation part orthonormal (within `ORTHONORMAL_TOL`) with determinant +1."""
-    try:
-        m = torch.as_tensor(matrix, dtype=torch.float64)
-    except (TypeError, ValueError, RuntimeError):
-        raise UserError(f"{where}: the pose is not a matrix of numbers") from None
-    if m.shape not in ((4, 4), (3, 4)):
-        raise UserError(f"{where}: the pose must be a 4x4 or 3x4 matrix, got shape {tuple(m.shape)}")
-    if not torch.isfinite(m).all():
-        row, col = (int(i) for i in torch.nonzero(~torch.isfinite(m))[0])
-        raise UserError(f"{where}: the pose holds a non-finite value ({float(m[row, col])}) at row {row}, column "
-                        f"{col}; fix the pose")
-    rot = m[:3, :3]
-    error = float((rot.T @ rot - torch.eye(3, dtype=torch.float64)).abs().max())
-    if error > ORTHONORMAL_TOL or float(torch.linalg.det(rot)) < 0:
-        raise UserError(f"{where}: the rotation part of the pose is not a rotation (|R^T R - I| = {error:.3g}, "
-                        f"det {float(torch.linalg.det(rot)):.3g}); fix the pose")
-    c2w = torch.eye(4, dtype=torch.float64)
-    c2w[:3, :] = m[:3, :]
-    return c2w
-
 
 def camera_from_c2w(uid: int, name: str, c2w_cv: torch.Tensor, fx: float, fy: float, cx: float, cy: float,
                     width: int, height: int) -> Camera:

@@ -18,6 +18,7 @@ import torch
 from scene.frames import (GL_TO_CV, IMAGE_SUFFIXES, CameraLoader, Frame, PointCloud, SceneInfo, drop_missing, image_size,
                           scene_extent, stored_scale)
 from scene.lens import LENS_MODELS, Lens
+from scene.pose_check import checked_c2w
 from scene.ply_io import load_points_ply
 from utils.errors import UserError
 
@@ -58,23 +59,14 @@ def _number(value, key: str, where: str, positive: bool) -> float:
 
 
 def frame_pose(source: Path, frame, where: str) -> Frame:
-    """The `Frame` of one entry of 'frames' (image path, world-to-camera in OpenCV axes)."""
+    """The `Frame` of one entry of 'frames' (image path, world-to-camera in OpenCV axes); `where` is "FILE frame i",
+    FILE relative to `source`."""
     if not isinstance(frame, dict) or "file_path" not in frame or "transform_matrix" not in frame:
         raise UserError(f"{where}: needs 'file_path' and 'transform_matrix'")
     if not isinstance(frame["file_path"], str):
         raise UserError(f"{where}: 'file_path' must be a string, got {frame['file_path']!r}")
-    try:
-        c2w = torch.tensor(frame["transform_matrix"], dtype=torch.float64)  # [4, 4], OpenGL axes
-    except (TypeError, ValueError):
-        raise UserError(f"{where}: 'transform_matrix' is not a 4x4 list of numbers") from None
-    if c2w.shape != (4, 4):
-        raise UserError(f"{where}: 'transform_matrix' must be a 4x4 matrix, got shape {tuple(c2w.shape)}")
-    if not torch.isfinite(c2w).all():
-        row, col = (int(i) for i in torch.nonzero(~torch.isfinite(c2w))[0])
-        raise UserError(f"{where}: 'transform_matrix' holds a non-finite value ({float(c2w[row, col])}) at row {row}, "
-                        f"column {col}; fix the pose")
-    if abs(float(torch.linalg.det(c2w[:3, :3]))) < 1e-9:
-        raise UserError(f"{where}: 'transform_matrix' has a singular rotation part; fix the pose")
+    # the pose rule of every reader (scene.pose_check), its messages naming the file by its path as recommend.py does
+    c2w = checked_c2w(frame["transform_matrix"], f"{source / where}")  # [4, 4], OpenGL axes
     return Frame(where, image_path(source, frame["file_path"]), torch.linalg.inv(c2w @ GL_TO_CV))
 
 

@@ -43,6 +43,7 @@ from gaussian_renderer.fisher_partials import attribute_gram
 from gaussian_renderer.projection import camera_center, project_gaussians
 from gaussian_renderer.sh import sh_to_colors
 from scene.gaussian_model import GaussianModel
+from utils.errors import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -263,4 +264,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_cli(main)

@@ -46,6 +46,7 @@ from gaussian_renderer.fisher_partials import attribute_gram
 from gaussian_renderer.rasterize import bin_gaussians, rasterize
 from gaussian_renderer.reference import rasterize_reference
 from gaussian_renderer.settings import RasterSettings
+from utils.errors import run_cli
 
 GARDEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "gsplat_garden" / "test_garden.npz"
 LEGO = Path(__file__).resolve().parents[2] / "shared" / "data" / "lego"
@@ -311,4 +312,4 @@ def run_backends_apart(args: argparse.Namespace, backends: list[str]) -> None:
     write_results("rasterize", args, rows)
 
 if __name__ == "__main__":
-    main()
+    run_cli(main)

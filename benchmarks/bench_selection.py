@@ -44,6 +44,7 @@ from gaussian_renderer import render
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from scene.trained import load_trained
 from utils.losses import photometric_loss
+from utils.errors import UserError, run_cli
 
 
 RESULTS_DIR = Path(__file__).parent / "results"
@@ -116,6 +117,8 @@ def main() -> None:
         return
 
     model_path = Path(args.model)
+    if not model_path.is_dir():
+        raise UserError(f"no model directory {model_path}: run scripts/quickstart.sh first, or pass --model DIR")
     trained = load_trained(model_path, device="cpu")
     gaussians, cams, bg, settings = trained.gaussians, trained.scene.train_cameras, trained.background, trained.settings
     if args.raster_backend:
@@ -333,4 +336,4 @@ def memory_table(args: argparse.Namespace) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_cli(main)

@@ -32,6 +32,7 @@ from active.schedule import farthest_point_views
 from gaussian_renderer import RasterSettings
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
+from utils.errors import run_cli
 
 RESULTS_DIR = Path(__file__).parent / "results"
 GARDEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "gsplat_garden" / "test_garden.npz"
@@ -232,4 +233,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_cli(main)

@@ -10,7 +10,7 @@ import pytest
 
 from active import build_selector
 from active.oracle_counts import mean_rounded_up, schedule_counts
-from tests.conftest import ROOT
+from tests.conftest import ROOT, run_cli
 from tests.fake_cli import POOL, calls, make_fake, option
 
 
@@ -88,3 +88,10 @@ def test_wrapper_without_venv_or_python_sets_up_the_environment(tmp_path, wrappe
     assert r.returncode == 0, r.stderr
     assert "setup_env: stub" in r.stderr
     assert log.read_text().startswith(f"{scripts / 'grid.py'} --setup ")
+
+
+def test_bench_selection_without_a_model_is_one_error_line(tmp_path):
+    """benchmarks/bench_selection.py (through run_cli) names the missing model and the way out, no traceback."""
+    r = run_cli("benchmarks/bench_selection.py", "--model", str(tmp_path / "absent"))
+    assert r.returncode != 0 and "Traceback" not in r.stderr
+    assert "error:" in r.stderr and "quickstart" in r.stderr and "--model" in r.stderr

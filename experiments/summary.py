@@ -54,9 +54,11 @@ class Run:
 
     @property
     def options_label(self) -> str:
-        """The selector options as 'name=value' words ('' for a selector without options)."""
+        """The selector options as 'name=value' words ('' for a selector without options); an option set to "none"
+        is off (e.g. gain_weight=none, the paper's criterion) and is left out, so labels stay as they were before
+        such an option existed."""
         return " ".join(f"{name}={value:g}" if isinstance(value, float) else f"{name}={value}"
-                        for name, value in sorted(self.options.items()))
+                        for name, value in sorted(self.options.items()) if value != "none")
 
     @property
     def setting(self) -> str:

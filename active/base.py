@@ -110,6 +110,8 @@ def check_k(k: int) -> None:
 
 
 GAIN_WEIGHTS = ("none", "opacity")  # --gain_weight: how the log-det selectors weigh each Gaussian's term
+GAIN_WEIGHT_HELP = (f"log-det selectors: weight of each Gaussian's term, one of {', '.join(GAIN_WEIGHTS)} ('opacity': "
+                    "by its opacity, so Gaussians that barely change a pixel count little)")
 
 
 def check_gain_weight(gain_weight: str) -> str:

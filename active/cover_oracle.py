@@ -26,6 +26,23 @@ import torch
 from scene.cameras import Camera
 
 
+def pixel_coordinates(means: torch.Tensor, camera: Camera) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Pinhole projection of points, without occlusion: pixel coordinates and whether each lands in the image.
+
+    Args:
+        means: points (Gaussian centres), float64. [N, 3]
+    Returns:
+        u [N], v [N] float64 (filled behind the camera too), inside [N] bool (positive depth, inside the image)
+    """
+    viewmat = camera.viewmat.double().cpu()
+    cam = means @ viewmat[:3, :3].T + viewmat[:3, 3]  # [N, 3] camera coordinates (OpenCV: z forward)
+    z = cam[:, 2]
+    safe_z = z.clamp_min(1e-9)
+    u = camera.fx * cam[:, 0] / safe_z + camera.cx
+    v = camera.fy * cam[:, 1] / safe_z + camera.cy
+    return u, v, (z > 1e-6) & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
+
+
 def frustum_directions(means: torch.Tensor, camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
     """Which Gaussians lie in `camera`'s frustum, and the unit direction from its centre to each.
 
@@ -34,13 +51,7 @@ def frustum_directions(means: torch.Tensor, camera: Camera) -> tuple[torch.Tenso
     Returns:
         inside [N] bool, directions [N, 3] float64 (rows outside the frustum are still filled)
     """
-    viewmat = camera.viewmat.double().cpu()
-    cam = means @ viewmat[:3, :3].T + viewmat[:3, 3]  # [N, 3] camera coordinates (OpenCV: z forward)
-    z = cam[:, 2]
-    safe_z = z.clamp_min(1e-9)
-    u = camera.fx * cam[:, 0] / safe_z + camera.cx
-    v = camera.fy * cam[:, 1] / safe_z + camera.cy
-    inside = (z > 1e-6) & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
+    inside = pixel_coordinates(means, camera)[2]
     offsets = means - camera.camera_center.double().cpu()
     return inside, offsets / offsets.norm(dim=-1, keepdim=True).clamp_min(1e-12)
 

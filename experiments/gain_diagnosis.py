@@ -13,12 +13,14 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
-from active.cover_oracle import CoverageOracle, frustum_directions
+from active.cover_oracle import CoverageOracle, frustum_directions, pixel_coordinates
 from active.fisher import FisherOracle
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
+from utils.uncertainty_metrics import spearman
 
 OPACITY_BINS = (0.05, 0.3, 0.7)  # edges: <0.05, 0.05-0.3, 0.3-0.7, >0.7
 FAR_FACTOR = 2.0  # far: distance from the scene centre > FAR_FACTOR x the median Gaussian distance
@@ -54,21 +56,10 @@ def per_gaussian_gains(oracle: FisherOracle, view_id: int) -> torch.Tensor:
     return out
 
 
-def _spearman(x: list[float], y: list[float]) -> float:
-    """Spearman rank correlation (average ranks for ties)."""
-    def ranks(values: list[float]) -> torch.Tensor:
-        t = torch.tensor(values, dtype=torch.float64)
-        order = torch.argsort(t)
-        r = torch.empty_like(t)
-        r[order] = torch.arange(len(values), dtype=torch.float64)
-        for u in torch.unique(t):  # ties: mean rank
-            m = t == u
-            r[m] = r[m].mean()
-        return r
-    rx, ry = ranks(x), ranks(y)
-    rx, ry = rx - rx.mean(), ry - ry.mean()
-    den = float(rx.norm() * ry.norm())
-    return float((rx * ry).sum()) / den if den > 0 else float("nan")
+def _rank_correlation(x: list[float], y: list[float]) -> float:
+    """Spearman's rank correlation (`utils.uncertainty_metrics.spearman`); NaN where undefined (a constant list)."""
+    rho = spearman(np.asarray(x), np.asarray(y))
+    return float("nan") if rho is None else rho
 
 
 def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[int], candidate_ids: list[int],
@@ -126,9 +117,9 @@ def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[in
         "median_term_all": sum(r["median_term"] for r in rows) / len(rows),
         "top1pct_share_mean": sum(r["top1pct_share"] for r in rows) / len(rows),
         "rank_correlation": {
-            "logdet_vs_opacity": _spearman(x, [by_id[i]["gain_opacity"] for i in ids]),
-            "logdet_vs_cover": _spearman(x, [by_id[i]["gain_cover"] for i in ids]),
-            "opacity_vs_cover": _spearman([by_id[i]["gain_opacity"] for i in ids], [by_id[i]["gain_cover"] for i in ids]),
+            "logdet_vs_opacity": _rank_correlation(x, [by_id[i]["gain_opacity"] for i in ids]),
+            "logdet_vs_cover": _rank_correlation(x, [by_id[i]["gain_cover"] for i in ids]),
+            "opacity_vs_cover": _rank_correlation([by_id[i]["gain_opacity"] for i in ids], [by_id[i]["gain_cover"] for i in ids]),
         },
         "top_picks": {"logdet": [by_id[i]["name"] for i in ids[:4]],
                       "opacity": [r["name"] for r in sorted(rows, key=lambda r: -r["gain_opacity"])[:4]],
@@ -183,15 +174,10 @@ def overlay(image: torch.Tensor, terms: torch.Tensor, gaussians: GaussianModel, 
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
-    means = gaussians.means.detach().double().cpu()
-    vm = camera.viewmat.double().cpu()
-    cam = means @ vm[:3, :3].T + vm[:3, 3]
-    z = cam[:, 2].clamp_min(1e-9)
-    u = (camera.fx * cam[:, 0] / z + camera.cx).floor().long()
-    v = (camera.fy * cam[:, 1] / z + camera.cy).floor().long()
+    u, v, inside = pixel_coordinates(gaussians.means.detach().double().cpu(), camera)
+    u, v = u.floor().long(), v.floor().long()
     w, h = camera.width, camera.height
-    ok = (cam[:, 2] > 1e-6) & (u >= 0) & (u < w) & (v >= 0) & (v < h) & (terms > 0)
+    ok = inside & (terms > 0)
     heat = torch.zeros(h * w, dtype=torch.float64)
     heat.index_add_(0, (v[ok] * w + u[ok]), terms[ok])
     heat = heat.reshape(1, 1, h, w)

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from active.base import SelectionContext
-from active.cover_oracle import CoverageOracle, frustum_directions
+from active.cover_oracle import CoverageOracle, frustum_directions, pixel_coordinates
 from active.registry import build_selector
 from active.selectors.lazy_greedy import lazy_greedy_select
 from active.selectors.pop_gs import exhaustive_greedy
@@ -71,6 +71,14 @@ def test_frustum_keeps_points_in_front_and_inside_the_image_only():
     inside, dirs = frustum_directions(points, cam)
     assert inside.tolist() == [True, False, False, True]  # behind the camera; far off to the side
     torch.testing.assert_close(dirs.norm(dim=-1), torch.ones(4, dtype=torch.float64))
+
+
+def test_a_point_straight_behind_the_camera_is_not_in_the_image():
+    """Behind the camera on its axis the clamped depth projects to the principal point: only the depth test says no."""
+    cam = Camera(0, "axis", torch.eye(4), 50.0, 50.0, 32.0, 24.0, 64, 48)  # at the origin looking along +z
+    u, v, inside = pixel_coordinates(torch.tensor([[0.0, 0.0, -2.0], [0.0, 0.0, 2.0]], dtype=torch.float64), cam)
+    assert inside.tolist() == [False, True]
+    assert (float(u[1]), float(v[1])) == (32.0, 24.0)
 
 
 def test_gains_equal_the_per_gaussian_definition_through_commits():

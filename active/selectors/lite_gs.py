@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 
 import torch
 
-from active.base import Selection, SelectionContext, Selector, check_eps, check_gain_weight, check_k, logdet_oracle_kind
+from active.base import (GAIN_WEIGHT_HELP, Selection, SelectionContext, Selector, check_eps, check_gain_weight, check_k,
+                         logdet_oracle_kind)
 from active.registry import register_selector
 from active.selectors.lazy_greedy import lazy_greedy_select
-from active.selectors.pop_gs import GAIN_WEIGHT_HELP
 
 
 def subset_size(remaining: int, k: int, eps: float) -> int:

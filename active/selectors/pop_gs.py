@@ -3,14 +3,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from active.base import (GAIN_WEIGHTS, GainOracle, Selection, SelectionContext, Selector, check_gain_weight, check_k,
-                         logdet_oracle_kind)
+from active.base import (GAIN_WEIGHT_HELP, GainOracle, Selection, SelectionContext, Selector, check_gain_weight,
+                         check_k, logdet_oracle_kind)
 from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
-
-GAIN_WEIGHT_HELP = (f"log-det selectors: weight of each Gaussian's term, one of {', '.join(GAIN_WEIGHTS)} ('opacity': "
-                    "by its opacity, so Gaussians that barely change a pixel count little)")
-
 
 def exhaustive_greedy(candidate_ids: list[int], k: int, oracle: GainOracle) -> Selection:
     """Plain greedy: M - j oracles at pick j, ties to the lowest id; each pick committed to `oracle`."""

@@ -1,6 +1,6 @@
-"""Recommend from poses alone, then train on the picks (CLI scripts/recommend_then_train.py, docs/recommend.md): a
-seed-view dataset without the candidates' images (`make_seed_dataset`), the runs of the project's CLIs (`run`), the
-loop over methods and seeds (`run_recommend_then_train`) and the summary table (`summary_table`)."""
+"""Recommend from poses alone, then train on the picks (CLI scripts/recommend_then_train.py, docs/recommend.md): the
+runs of the project's CLIs (`run`), the loop over methods and seeds on a seed-view dataset (experiments/seed_dataset.py)
+(`run_recommend_then_train`) and the summary table (`summary_table`)."""
 from __future__ import annotations
 
 import argparse
@@ -14,49 +14,14 @@ from pathlib import Path
 
 import torch
 
-from active.schedule import farthest_point_views
 from experiments.jobs import THREAD_VARS
-from scene.pose_files import read_pose_file
+from experiments.seed_dataset import make_seed_dataset
 from utils import model_dir
 from utils.checkpoint import RunDirectory
 from utils.errors import UserError
 from utils.io import write_json
 
 ROOT = Path(__file__).resolve().parents[1]
-IMAGE_EXTENSIONS = (".png", ".jpg", "")  # a Blender frame's file_path names its image without (or with) one
-
-
-def make_seed_dataset(data: Path, out: Path, num_seed: int) -> tuple[list[int], list[int]]:
-    """OUT/data: transforms_train.json with the `num_seed` seed frames, the test split, links to those images only,
-    and candidates.json (the other training frames, whose images are not linked). Returns (seed ids, candidate ids)
-    as indices of DATA/transforms_train.json."""
-    train = json.loads((data / "transforms_train.json").read_text())
-    test = json.loads((data / "transforms_test.json").read_text())
-    frames = train["frames"]
-    centers = torch.stack([c.camera_center for c in read_pose_file(data / "transforms_train.json",
-                                                                   default_size=(800, 800))])
-    seeds = farthest_point_views(centers.double(), num_seed)
-    candidates = [v for v in range(len(frames)) if v not in seeds]
-    folder = out / "data"
-    for frame in [frames[v] for v in seeds] + test["frames"]:
-        for ext in IMAGE_EXTENSIONS:
-            src = data / (frame["file_path"] + ext)
-            if src.is_file():
-                dst = folder / (frame["file_path"] + ext)
-                dst.parent.mkdir(parents=True, exist_ok=True)
-                if not dst.exists():
-                    dst.symlink_to(src.resolve())
-                break
-        else:
-            raise UserError(f"{data}: no image for frame {frame['file_path']!r}")
-    write_json(folder / "transforms_train.json", {**train, "frames": [frames[v] for v in seeds]})
-    write_json(folder / "transforms_test.json", test)
-    write_json(folder / "candidates.json", {**train, "frames": [frames[v] for v in candidates]})
-    present = [v for v in candidates
-               if any((folder / (frames[v]["file_path"] + e)).exists() for e in IMAGE_EXTENSIONS)]
-    if present:
-        raise UserError(f"{folder}: candidate images are present ({present[:5]}); remove them")
-    return seeds, candidates
 
 
 def method_args(spec: str) -> list[str]:
@@ -67,7 +32,8 @@ def method_args(spec: str) -> list[str]:
     for option in options:
         key, sep, value = option.partition("=")
         if not sep or not key or not value:
-            raise UserError(f"method {spec!r}: write selector options as NAME+OPTION=VALUE (e.g. pop_gs+gain_weight=opacity)")
+            raise UserError(f"method {spec!r}: write selector options as NAME+OPTION=VALUE "
+                            "(e.g. pop_gs+gain_weight=opacity)")
         flags += [f"--{key}", value]
     return flags
 
@@ -90,7 +56,7 @@ def summary_table(results: dict, methods: list[str], seeds: list[int]) -> str:
     lines = [f"Seed views {s['seed_views']} ({s['base_iterations']} iterations: base test PSNR "
              f"{s['base_test_psnr']:.2f} dB); +{s['k']} views from {s['candidates']} candidate poses, then "
              f"{s['iterations']} iterations from the base model (`--init_ply`), -r {s['resolution']}, "
-             f"`{s['train_args']}`.", "",
+             f"`{s['train_args']}`." + (f" {s['seed_data']}." if s.get("seed_data") else ""), "",
              "| added views from | " + " | ".join(f"seed {x}" for x in seeds) + " | mean ± std | picks (seed "
              f"{seeds[0]}) | oracles evaluated / conservative |",
              "|---|" + "---|" * len(seeds) + "---|---|---|"]
@@ -110,32 +76,33 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
     method and seed recommend.py and the continued training; writes OUT/results.json and OUT/summary.md, reusing the
     finished steps."""
     data, out = Path(args.data), Path(args.output)
-    if not (data / "transforms_train.json").is_file() or not (data / "transforms_test.json").is_file():
-        raise UserError(f"{data} is not a Blender dataset with transforms_train.json and transforms_test.json")
     out.mkdir(parents=True, exist_ok=True)
     (out / "logs").mkdir(exist_ok=True)
-    seeds, candidates = make_seed_dataset(data, out, args.num_seed_views)
-    print(f"seed views {seeds}; {len(candidates)} candidate poses in {out / 'data' / 'candidates.json'} "
-          "(their images are not in that folder)")
-    common = ["-r", args.resolution, "--eval", "-w", "-q", *args.train_args.split()]
+    seed_data = make_seed_dataset(data, out, args.num_seed_views, images=args.images)
+    seeds, candidates = seed_data.seeds, seed_data.candidates
+    print(f"seed views {seeds}; {len(candidates)} candidate poses in {seed_data.candidate_poses} (their images are "
+          "not in that folder)" + (f"; {seed_data.note}" if seed_data.note else ""))
+    common = ["-r", args.resolution, "--eval", "-q", *args.train_args.split()]
     base = out / "base"
     if not RunDirectory(base).is_complete():
-        secs = run(["train.py", "-s", str(out / "data"), "-m", str(base), "--iterations", str(args.base_iterations),
-                    "--overwrite", *common], args.threads, out / "logs" / "base.log")
+        secs = run(["train.py", "-s", str(seed_data.folder), "-m", str(base), "--iterations",
+                    str(args.base_iterations), "--overwrite", *seed_data.seed_flags, *common], args.threads,
+                   out / "logs" / "base.log")
         print(f"base model on {len(seeds)} views: {secs:.0f} s")
     base_status = json.loads((base / model_dir.RUN_STATUS).read_text())
     base_ply = model_dir.point_cloud_ply(base, args.base_iterations)
     results_path = out / "results.json"
     results = json.loads(results_path.read_text()) if results_path.is_file() else {}
     results["settings"] = {**vars(args), "seed_views": seeds, "candidates": len(candidates),
-                           "base_test_psnr": base_status["test_psnr"]}
+                           "base_test_psnr": base_status["test_psnr"], **({"seed_data": seed_data.note}
+                                                                          if seed_data.note else {})}
     for method in args.methods:
         for seed in args.seeds:
             key = f"{method}/seed{seed}"
             row = results.get(key, {})
             if method != "none" and "picks" not in row:
                 rec_dir = out / "recommend" / f"{method}_seed{seed}"
-                secs = run(["recommend.py", "-m", str(base), "--candidates", str(out / "data" / "candidates.json"),
+                secs = run(["recommend.py", "-m", str(base), "--candidates", str(seed_data.candidate_poses),
                             "-k", str(args.k), *method_args(method), "--seed", str(seed), "-o", str(rec_dir),
                             "--quiet", "--no_previews"], args.threads, out / "logs" / f"recommend_{method}_{seed}.log")
                 rec = json.loads((rec_dir / "recommendations.json").read_text())
@@ -148,7 +115,8 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
                     ["train.py", "-s", str(data), "-m", str(model), "--method", "random", "--init_views",
                      *map(str, views), "--max_views", str(len(views)), "--views_per_step", str(args.k),
                      "--iterations", str(args.iterations), "--init_ply", str(base_ply), "--seed", str(seed),
-                     "--overwrite", *common], args.threads, out / "logs" / f"continue_{method}_{seed}.log")
+                     "--overwrite", *seed_data.full_flags, *common], args.threads,
+                    out / "logs" / f"continue_{method}_{seed}.log")
                 row["test_psnr"] = json.loads((model / model_dir.RUN_STATUS).read_text())["test_psnr"]
             results[key] = row
             write_json(results_path, results)

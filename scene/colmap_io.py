@@ -1,4 +1,4 @@
-"""A small reader for COLMAP sparse models (cameras, images, points3D), binary and text."""
+"""A small reader for COLMAP sparse models (cameras, images, points3D), binary and text, and a text writer."""
 from __future__ import annotations
 
 import struct
@@ -156,6 +156,41 @@ def read_model(sparse_dir: Path):
         raise UserError(f"COLMAP model in {sparse_dir} is incomplete: {Path(exc.filename).name} is missing") from None
     except (EOFError, struct.error, KeyError, ValueError, IndexError):
         raise UserError(f"COLMAP model in {sparse_dir} is corrupt or truncated; re-export it from COLMAP") from None
+
+
+def read_point_tracks(sparse_dir: Path) -> list[np.ndarray]:
+    """The ids of the images that observe each 3D point of `sparse_dir` ([T_p] int64 each), in read_model's point
+    order (binary preferred over text)."""
+    tracks = []
+    if (sparse_dir / "points3D.bin").is_file():
+        with open(sparse_dir / "points3D.bin", "rb") as fh:
+            (count,) = _read(fh, "Q")
+            for _ in range(count):
+                _read(fh, "QdddBBBd")
+                (track_len,) = _read(fh, "Q")
+                pairs = np.frombuffer(fh.read(8 * track_len), dtype="<i4")  # (image id, point2D index) pairs
+                if len(pairs) != 2 * track_len:
+                    raise UserError(f"COLMAP model in {sparse_dir} is corrupt or truncated; re-export it from COLMAP")
+                tracks.append(pairs[0::2].astype(np.int64))
+        return tracks
+    for line in _text_lines(sparse_dir / "points3D.txt"):
+        tracks.append(np.array([int(v) for v in line.split()[8::2]], dtype=np.int64))
+    return tracks
+
+
+def write_model_text(sparse_dir: Path, cameras: dict[int, ColmapCamera], images: dict[int, ColmapImage],
+                     xyz: np.ndarray, rgb: np.ndarray) -> None:
+    """`sparse_dir`/{cameras,images,points3D}.txt: the model without 2D points or tracks (what the readers use)."""
+    sparse_dir.mkdir(parents=True, exist_ok=True)
+    (sparse_dir / "cameras.txt").write_text("".join(
+        f"{c.id} {c.model} {c.width} {c.height} " + " ".join(repr(float(v)) for v in c.params) + "\n"
+        for c in cameras.values()))
+    (sparse_dir / "images.txt").write_text("".join(
+        f"{im.id} " + " ".join(repr(float(v)) for v in (*im.qvec, *im.tvec)) + f" {im.camera_id} {im.name}\n\n"
+        for im in images.values()))
+    (sparse_dir / "points3D.txt").write_text("".join(
+        f"{i + 1} {p[0]!r} {p[1]!r} {p[2]!r} {c[0]} {c[1]} {c[2]} 0\n"
+        for i, (p, c) in enumerate(zip(xyz.tolist(), rgb.tolist()))))
 
 
 def qvec_to_rotmat(q: np.ndarray) -> np.ndarray:

@@ -13,8 +13,8 @@ from pathlib import Path
 import torch
 
 from scene import colmap_io
-from scene.frames import (GL_TO_CV, CameraLoader, Frame, PointCloud, SceneInfo, drop_missing, image_size,
-                          load_composited, scene_extent, stored_scale, target_size)
+from scene.frames import (GL_TO_CV, LLFFHOLD, CameraLoader, Frame, PointCloud, SceneInfo, drop_missing, held_out,
+                          image_size, load_composited, scene_extent, stored_scale, target_size)
 from scene.transforms_json import frame_lens, frame_pose, read_nerfstudio, read_transforms_file
 from utils.errors import UserError
 
@@ -89,7 +89,7 @@ def read_colmap(source: Path, images: str, resolution: int, eval: bool, llffhold
         viewmat[:3, :3] = torch.from_numpy(colmap_io.qvec_to_rotmat(im.qvec))
         viewmat[:3, 3] = torch.from_numpy(im.tvec)
         listed.append((Frame(where, image_dir / im.name, viewmat), cam))
-    test_ids = {id(f) for i, (f, _) in enumerate(listed) if eval and i % llffhold == 0}
+    test_ids = {id(f) for i, (f, _) in enumerate(listed) if eval and held_out(i, llffhold)}
     kept, dropped = drop_missing([f for f, _ in listed], skip_missing, image_dir)
     camera_of = {id(f): cam for f, cam in listed}
     loader = CameraLoader(source, resolution, torch.zeros(3), ignore_distortion)
@@ -111,8 +111,8 @@ def read_colmap(source: Path, images: str, resolution: int, eval: bool, llffhold
 
 
 def load_scene_info(source_path: str, *, white_background: bool = False, resolution: int = -1, eval: bool = False,
-                    images: str = "images", llffhold: int = 8, device: str = "cpu", skip_missing_images: bool = False,
-                    ignore_distortion: bool = False) -> SceneInfo:
+                    images: str = "images", llffhold: int = LLFFHOLD, device: str = "cpu",
+                    skip_missing_images: bool = False, ignore_distortion: bool = False) -> SceneInfo:
     """Detect the dataset layout (Blender, nerfstudio / instant-ngp or COLMAP) and load it.
 
     Args:

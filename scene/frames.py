@@ -71,6 +71,15 @@ class Frame:
         return self.path.stem
 
 
+LLFFHOLD = 8  # --eval's default: every 8th image is a test image (Mip-NeRF 360's llffhold)
+
+
+def held_out(index: int, llffhold: int) -> bool:
+    """The test-split rule of `--eval` for COLMAP and transforms.json datasets: every `llffhold`-th listed frame
+    (sorted by name, counting from 0), before missing images are dropped."""
+    return index % llffhold == 0
+
+
 def drop_missing(frames: list[Frame], skip_missing: bool, root: Path) -> tuple[list[Frame], list[str]]:
     """The frames whose image exists, and the (root-relative) names of those that do not.
 

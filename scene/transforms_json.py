@@ -15,8 +15,8 @@ from pathlib import Path
 
 import torch
 
-from scene.frames import (GL_TO_CV, IMAGE_SUFFIXES, CameraLoader, Frame, PointCloud, SceneInfo, drop_missing, image_size,
-                          scene_extent, stored_scale)
+from scene.frames import (GL_TO_CV, IMAGE_SUFFIXES, CameraLoader, Frame, PointCloud, SceneInfo, drop_missing,
+                          held_out, image_size, scene_extent, stored_scale)
 from scene.lens import LENS_MODELS, Lens
 from scene.pose_check import checked_c2w
 from scene.ply_io import load_points_ply
@@ -142,7 +142,7 @@ def read_nerfstudio(source: Path, white_background: bool, resolution: int, eval:
                  data["aabb_scale"])
     listed = [(frame_pose(source, fr, f"transforms.json frame {i}"), fr) for i, fr in enumerate(data["frames"])]
     listed.sort(key=lambda item: item[1]["file_path"])
-    test_ids = {id(f) for i, (f, _) in enumerate(listed) if eval and i % llffhold == 0}
+    test_ids = {id(f) for i, (f, _) in enumerate(listed) if eval and held_out(i, llffhold)}
     kept, dropped = drop_missing([f for f, _ in listed], skip_missing, source)
     entry = {id(f): fr for f, fr in listed}
     loader = CameraLoader(source, resolution, torch.ones(3) if white_background else torch.zeros(3),

@@ -1,9 +1,10 @@
 """Recommend the next views from poses alone, then train on them: recommend.py against random and coverage picks.
 
-On a Blender dataset (default: lego): train a model on S seed views (farthest-point sampling, as train.py seeds), in a
-folder that holds only those S training images and the test images; rank the other training views by their *poses*
-(a transforms file whose images are not in that folder, so no candidate image can be read) with recommend.py for each
-method and seed; then continue training the S-view model (`train.py --init_ply`) on the S + K views, the same
+On a Blender dataset (default: lego) or a COLMAP one (convert.py's output; test split: train.py --eval's): train a
+model on S seed views (farthest-point sampling, as train.py seeds), in a folder that holds only those S training images
+and the test images (on COLMAP, with the SfM points that two seed views observe); rank the other training views by
+their *poses* (a pose file whose images are not in that folder, so no candidate image can be read) with recommend.py
+for each method and seed; then continue training the S-view model (`train.py --init_ply`) on the S + K views, the same
 iterations for every method, and record the test PSNR. Method "none" continues on the S views alone (the reference).
 
     python scripts/recommend_then_train.py --data ../shared/data/lego --methods lite_gs coverage random none \
@@ -22,7 +23,9 @@ from utils.errors import run_cli
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--data", default="../shared/data/lego", help="Blender dataset (transforms_train/test.json)")
+    p.add_argument("--data", default="../shared/data/lego",
+                   help="Blender dataset (transforms_train/test.json) or COLMAP one (sparse/0; test split: --eval's)")
+    p.add_argument("-i", "--images", default="images", help="a COLMAP dataset's image folder (train.py's -i)")
     p.add_argument("-o", "--output", default="output/recommend_then_train")
     p.add_argument("--methods", nargs="+", default=["lite_gs", "coverage", "random", "none"],
                    help="recommend.py selectors, NAME or NAME+OPTION=VALUE (e.g. pop_gs+gain_weight=opacity), "

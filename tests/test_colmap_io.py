@@ -92,6 +92,34 @@ def test_round_trip(tmp_path, fmt):
     assert rgb.dtype == np.uint8
 
 
+@pytest.mark.parametrize("fmt", ["binary", "text"])
+def test_point_tracks(tmp_path, fmt):
+    cameras, images, points = sample_model(3)
+    (write_binary if fmt == "binary" else write_text)(tmp_path, cameras, images, points)
+    tracks = colmap_io.read_point_tracks(tmp_path)
+    assert [t.tolist() for t in tracks] == [[1, 2], [1, 2]]  # both writers give every point the track (1, 2)
+
+
+def test_text_writer_round_trip(tmp_path):
+    cameras, images, points = sample_model(4, "OPENCV", (50.0, 55.0, 20.0, 10.0, 0.1, -0.01, 0.001, 0.002))
+    write_binary(tmp_path / "bin", cameras, images, points)
+    cams, imgs, (xyz, rgb) = colmap_io.read_model(tmp_path / "bin")
+    colmap_io.write_model_text(tmp_path / "txt", cams, imgs, xyz[1:], rgb[1:])
+    cams2, imgs2, (xyz2, rgb2) = colmap_io.read_model(tmp_path / "txt")
+    assert sorted(cams2) == sorted(cams)
+    for cid, cam in cams.items():
+        assert (cams2[cid].model, cams2[cid].width, cams2[cid].height) == (cam.model, cam.width, cam.height)
+        np.testing.assert_array_equal(cams2[cid].params, cam.params)
+    assert sorted(imgs2) == sorted(imgs)
+    for iid, im in imgs.items():
+        assert imgs2[iid].name == im.name and imgs2[iid].camera_id == im.camera_id
+        np.testing.assert_array_equal(imgs2[iid].qvec, im.qvec)
+        np.testing.assert_array_equal(imgs2[iid].tvec, im.tvec)
+    np.testing.assert_array_equal(xyz2, xyz[1:])
+    np.testing.assert_array_equal(rgb2, rgb[1:])
+    assert [t.tolist() for t in colmap_io.read_point_tracks(tmp_path / "txt")] == [[]]
+
+
 def quat_rotate(q, v) -> np.ndarray:
     """Slow twin: rotate v by the unit quaternion q (wxyz) as q v q*."""
     def mul(a, b):

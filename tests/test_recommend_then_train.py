@@ -4,14 +4,20 @@ import json
 
 import pytest
 
-from experiments.recommend_train_loop import make_seed_dataset
+from experiments.seed_dataset import make_seed_dataset
+from scene.dataset_readers import load_scene_info
+from scene.pose_files import read_pose_file
 from tests.conftest import ROOT, run_cli
+from tests.test_colmap_io import write_colmap_scene
+from utils.errors import UserError
 
 SCRIPT = ROOT / "scripts" / "recommend_then_train.py"
 
 
 def test_seed_dataset_links_seed_and_test_images_only(tiny_scene, tmp_path):
-    seeds, candidates = make_seed_dataset(tiny_scene, tmp_path, 5)
+    made = make_seed_dataset(tiny_scene, tmp_path, 5)
+    seeds, candidates = made.seeds, made.candidates
+    assert made.candidate_poses == tmp_path / "data" / "candidates.json"
     frames = json.loads((tiny_scene / "transforms_train.json").read_text())["frames"]
     assert len(seeds) == 5 and candidates and sorted(seeds + candidates) == list(range(len(frames)))
     folder = tmp_path / "data"
@@ -23,6 +29,38 @@ def test_seed_dataset_links_seed_and_test_images_only(tiny_scene, tmp_path):
     assert not any((folder / (frames[v]["file_path"] + ".png")).exists() for v in candidates)
     test = json.loads((folder / "transforms_test.json").read_text())["frames"]
     assert test and all((folder / (f["file_path"] + ".png")).is_file() for f in test)
+
+
+def test_colmap_seed_dataset_keeps_seed_images_test_split_and_seed_points(tmp_path):
+    """COLMAP: the seed folder links the seed and --eval test images only, keeps the SfM points two seed views
+    observe, and lists the candidates' poses (without images) in a COLMAP model of their own."""
+    data = tmp_path / "colmap"
+    images = write_colmap_scene(data, 10, fmt="text")  # ids 10..19; sorted by name, indices 0 and 8 are test
+    names = sorted(name for *_, name in images)
+    id_of = {name: iid for iid, *_, name in images}
+    ids = [id_of[n] for n in names]
+    (data / "sparse" / "0" / "points3D.txt").write_text(
+        "1 0 0 0 255 0 0 0.5 " + " ".join(f"{i} 0" for i in ids) + "\n"  # seen by every view: kept
+        f"2 1 1 1 0 255 0 0.5 {ids[1]} 0\n"  # seen by one view: dropped
+        "3 2 2 2 0 0 255 0.5\n")  # seen by none: dropped
+    made = make_seed_dataset(data, tmp_path / "out", 3)
+    train = [n for i, n in enumerate(names) if i % 8]
+    assert len(made.seeds) == 3 and sorted(made.seeds + made.candidates) == list(range(len(train)))
+    folder = made.folder
+    linked = sorted(p.name for p in (folder / "images").iterdir())
+    assert linked == sorted([train[v] for v in made.seeds] + [names[0], names[8]])
+    assert "1 of 3 SfM points" in made.note
+    info = load_scene_info(str(folder), eval=True, skip_missing_images=True)
+    assert [c.image_name for c in info.train_cameras] == [train[v].rsplit(".", 1)[0] for v in sorted(made.seeds)]
+    assert len(info.test_cameras) == 2 and len(info.point_cloud.points) == 1
+    listed = [c.image_name for c in read_pose_file(made.candidate_poses)]
+    assert listed == [train[v].rsplit(".", 1)[0] for v in made.candidates]
+    assert made.seed_flags == ["-i", "images", "--skip_missing_images"] and made.full_flags == ["-i", "images"]
+
+
+def test_seed_dataset_refuses_other_layouts(tmp_path):
+    with pytest.raises(UserError, match="neither a Blender dataset .* nor a COLMAP one"):
+        make_seed_dataset(tmp_path, tmp_path / "out", 3)
 
 
 @pytest.mark.slow

@@ -1,0 +1,110 @@
+"""The seed-view dataset of recommend-then-train: a folder holding the images of S seed views and the test split, and
+the poses (never the images) of the other training views, the candidates. Blender and COLMAP datasets.
+
+Seeds are farthest-point samples of the training cameras' centres (as train.py seeds). On COLMAP, the seed folder's
+SfM points are the points that at least `MIN_SEED_OBSERVATIONS` seed images observe, so that the seed model starts
+from the geometry its S captures could give, not from the points triangulated with the candidates' images.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from active.schedule import farthest_point_views
+from scene import colmap_io
+from scene.frames import LLFFHOLD, held_out
+from scene.pose_files import read_pose_file
+from utils.errors import UserError
+from utils.io import write_json
+
+IMAGE_EXTENSIONS = (".png", ".jpg", "")  # a Blender frame's file_path names its image without (or with) one
+MIN_SEED_OBSERVATIONS = 2  # a kept SfM point is observed by this many seed images (triangulable from the seeds)
+
+
+@dataclass
+class SeedDataset:
+    """What `make_seed_dataset` wrote; seed and candidate ids index the full dataset's training views."""
+
+    folder: Path  # OUT/data: the seed views' images, the test split, the candidates' poses
+    seeds: list[int]
+    candidates: list[int]
+    candidate_poses: Path  # for recommend.py --candidates
+    seed_flags: list[str]  # train.py flags of the seed model (on `folder`)
+    full_flags: list[str]  # train.py flags of the continued training (on the full dataset)
+    note: str = ""  # what was kept, for the log
+
+
+def make_seed_dataset(data: Path, out: Path, num_seed: int, *, images: str = "images") -> SeedDataset:
+    """OUT/data for a Blender (transforms_train/test.json) or COLMAP (sparse/0) dataset `data`; `images` is
+    train.py's -i of a COLMAP dataset, whose test split is train.py's --eval split. Raises UserError for any other
+    layout, a missing image, or candidate images present in OUT/data."""
+    if (data / "transforms_train.json").is_file() and (data / "transforms_test.json").is_file():
+        return _blender_seed_dataset(data, out / "data", num_seed)
+    if (data / "sparse" / "0").is_dir():
+        return _colmap_seed_dataset(data, out / "data", num_seed, images)
+    raise UserError(f"{data} is neither a Blender dataset (transforms_train.json and transforms_test.json) nor a "
+                    "COLMAP one (sparse/0); point --data at one (convert.py makes a COLMAP one from photographs)")
+
+
+def _link(src: Path, dst: Path) -> None:
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    if not dst.exists():
+        dst.symlink_to(src.resolve())
+
+
+def _blender_seed_dataset(data: Path, folder: Path, num_seed: int) -> SeedDataset:
+    train = json.loads((data / "transforms_train.json").read_text())
+    test = json.loads((data / "transforms_test.json").read_text())
+    frames = train["frames"]
+    centers = torch.stack([c.camera_center for c in read_pose_file(data / "transforms_train.json",
+                                                                   default_size=(800, 800))])
+    seeds = farthest_point_views(centers.double(), num_seed)
+    candidates = [v for v in range(len(frames)) if v not in seeds]
+    for frame in [frames[v] for v in seeds] + test["frames"]:
+        ext = next((e for e in IMAGE_EXTENSIONS if (data / (frame["file_path"] + e)).is_file()), None)
+        if ext is None:
+            raise UserError(f"{data}: no image for frame {frame['file_path']!r}")
+        _link(data / (frame["file_path"] + ext), folder / (frame["file_path"] + ext))
+    write_json(folder / "transforms_train.json", {**train, "frames": [frames[v] for v in seeds]})
+    write_json(folder / "transforms_test.json", test)
+    write_json(folder / "candidates.json", {**train, "frames": [frames[v] for v in candidates]})
+    present = [v for v in candidates
+               if any((folder / (frames[v]["file_path"] + e)).exists() for e in IMAGE_EXTENSIONS)]
+    if present:
+        raise UserError(f"{folder}: candidate images are present ({present[:5]}); remove them")
+    return SeedDataset(folder, seeds, candidates, folder / "candidates.json", ["-w"], ["-w"])
+
+
+def _colmap_seed_dataset(data: Path, folder: Path, num_seed: int, images: str) -> SeedDataset:
+    sparse = data / "sparse" / "0"
+    cams, imgs, (xyz, rgb) = colmap_io.read_model(sparse)
+    ordered = sorted(imgs.values(), key=lambda im: im.name)  # the readers' order; held_out() splits it
+    poses = read_pose_file(sparse)  # the same order
+    train = [i for i in range(len(ordered)) if not held_out(i, LLFFHOLD)]
+    test = [i for i in range(len(ordered)) if held_out(i, LLFFHOLD)]
+    seeds = farthest_point_views(torch.stack([poses[i].camera_center for i in train]).double(), num_seed)
+    candidates = [v for v in range(len(train)) if v not in seeds]
+    for i in [train[v] for v in seeds] + test:
+        src = data / images / ordered[i].name
+        if not src.is_file():
+            raise UserError(f"{data}: no image {src} for COLMAP image {ordered[i].name}")
+        _link(src, folder / images / ordered[i].name)
+    seed_ids = np.array([ordered[train[v]].id for v in seeds])
+    tracks = colmap_io.read_point_tracks(sparse)
+    keep = np.array([len(np.intersect1d(t, seed_ids)) >= MIN_SEED_OBSERVATIONS for t in tracks], dtype=bool)
+    if not keep.any():
+        raise UserError(f"{sparse}: no SfM point is observed by {MIN_SEED_OBSERVATIONS} of the {num_seed} seed "
+                        "views; use more seed views (--num_seed_views)")
+    colmap_io.write_model_text(folder / "sparse" / "0", cams, imgs, xyz[keep], rgb[keep])
+    candidate_images = {ordered[train[v]].id: ordered[train[v]] for v in candidates}
+    colmap_io.write_model_text(folder / "candidates", cams, candidate_images, xyz[:0], rgb[:0])
+    present = [ordered[train[v]].name for v in candidates if (folder / images / ordered[train[v]].name).exists()]
+    if present:
+        raise UserError(f"{folder / images}: candidate images are present ({present[:5]}); remove them")
+    note = (f"{int(keep.sum())} of {len(keep)} SfM points kept (observed by >= {MIN_SEED_OBSERVATIONS} seed views)")
+    return SeedDataset(folder, seeds, candidates, folder / "candidates", ["-i", images, "--skip_missing_images"],
+                       ["-i", images], note)

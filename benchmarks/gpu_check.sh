@@ -27,7 +27,7 @@ fi
 mkdir -p "$OUTDIR"
 LOG="$OUTDIR/gpu_check.log"
 export PYTHONUNBUFFERED=1
-# The device machine's python has no editable install of the project (scripts/setup_env.sh): import it from here.
+# The device machine's python does not have this checkout on its path (scripts/setup_env.sh's .venv does): add it.
 export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}"
 START=$SECONDS
 left() { echo $((TOTAL_S - (SECONDS - START))); }

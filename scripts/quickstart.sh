@@ -4,7 +4,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY="$(bash scripts/setup_env.sh | tail -n 1)"
-ln -sfn "$(dirname "$(dirname "$PY")")" .venv
 OUT="${OUT:-output/quickstart}"
 "$PY" -m scene.builtin data/builtin
 "$PY" train.py -s data/builtin -m "$OUT" --eval --method lite_gs --eps 0.1 \

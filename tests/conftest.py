@@ -1,6 +1,6 @@
 """Shared test set-up: the shared data directory, tiny generated datasets, running the CLIs (the repository root is
-on the import path through pytest.ini's `pythonpath`, the editable install for everything else), and a guard that
-fails any test reaching the rasterizer with backend="auto" unless it opts in."""
+on the import path through pytest.ini's `pythonpath`, and through the checkout's .venv for everything else), and a
+guard that fails any test reaching the rasterizer with backend="auto" unless it opts in."""
 from __future__ import annotations
 
 import importlib

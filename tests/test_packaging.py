@@ -26,7 +26,7 @@ def test_pyproject_includes_every_package():
 def test_no_sys_path_edits_and_no_scripts_loaded_as_modules():
     edits = [str(p.relative_to(ROOT)) for p in _python_files() if re.search(r"sys\.path\.(insert|append)|sys\.path\s*=",
                                                                             p.read_text())]
-    assert not edits, f"sys.path edited in {edits}; import the installed packages instead"
+    assert not edits, f"sys.path edited in {edits}; import the packages instead"
     loaders = [str(p.relative_to(ROOT)) for p in _python_files()
                if "spec_from_file_location" in p.read_text() or re.search(r"^\s*import train\b", p.read_text(), re.M)]
     assert not loaders, f"a script loaded as a module in {loaders}; move the code into a package"

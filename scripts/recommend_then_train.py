@@ -2,7 +2,7 @@
 
 On a Blender dataset (default: lego) or a COLMAP one (convert.py's output; test split: train.py --eval's): train a
 model on S seed views (farthest-point sampling, as train.py seeds), in a folder that holds only those S training images
-and the test images (on COLMAP, with the SfM points that two seed views observe); rank the other training views by
+and the test images (on COLMAP, with the SfM points that a seed view observes); rank the other training views by
 their *poses* (a pose file whose images are not in that folder, so no candidate image can be read) with recommend.py
 for each method and seed; then continue training the S-view model (`train.py --init_ply`) on the S + K views, the same
 iterations for every method, and record the test PSNR. Method "none" continues on the S views alone (the reference).

@@ -32,8 +32,8 @@ def test_seed_dataset_links_seed_and_test_images_only(tiny_scene, tmp_path):
 
 
 def test_colmap_seed_dataset_keeps_seed_images_test_split_and_seed_points(tmp_path):
-    """COLMAP: the seed folder links the seed and --eval test images only, keeps the SfM points two seed views
-    observe, and lists the candidates' poses (without images) in a COLMAP model of their own."""
+    """COLMAP: the seed folder links the seed and --eval test images only, keeps the SfM points a seed view
+    observes, and lists the candidates' poses (without images) in a COLMAP model of their own."""
     data = tmp_path / "colmap"
     images = write_colmap_scene(data, 10, fmt="text")  # ids 10..19; sorted by name, indices 0 and 8 are test
     names = sorted(name for *_, name in images)
@@ -41,7 +41,7 @@ def test_colmap_seed_dataset_keeps_seed_images_test_split_and_seed_points(tmp_pa
     ids = [id_of[n] for n in names]
     (data / "sparse" / "0" / "points3D.txt").write_text(
         "1 0 0 0 255 0 0 0.5 " + " ".join(f"{i} 0" for i in ids) + "\n"  # seen by every view: kept
-        f"2 1 1 1 0 255 0 0.5 {ids[1]} 0\n"  # seen by one view: dropped
+        f"2 1 1 1 0 255 0 0.5 {ids[0]} 0 {ids[8]} 0\n"  # seen by the test views only: dropped
         "3 2 2 2 0 0 255 0.5\n")  # seen by none: dropped
     made = make_seed_dataset(data, tmp_path / "out", 3)
     train = [n for i, n in enumerate(names) if i % 8]

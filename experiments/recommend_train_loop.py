@@ -4,7 +4,6 @@ loop over methods and seeds (`run_recommend_then_train`) and the summary table (
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import subprocess
@@ -20,7 +19,7 @@ from scene.pose_files import read_pose_file
 from utils import model_dir
 from utils.checkpoint import RunDirectory
 from utils.errors import UserError
-from utils.io import write_json
+from utils.io import read_json, write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 IMAGE_EXTENSIONS = (".png", ".jpg", "")  # a Blender frame's file_path names its image without (or with) one
@@ -30,8 +29,8 @@ def make_seed_dataset(data: Path, out: Path, num_seed: int) -> tuple[list[int], 
     """OUT/data: transforms_train.json with the `num_seed` seed frames, the test split, links to those images only,
     and candidates.json (the other training frames, whose images are not linked). Returns (seed ids, candidate ids)
     as indices of DATA/transforms_train.json."""
-    train = json.loads((data / "transforms_train.json").read_text())
-    test = json.loads((data / "transforms_test.json").read_text())
+    train = read_json(data / "transforms_train.json", what="dataset split", fix="fix or regenerate it")
+    test = read_json(data / "transforms_test.json", what="dataset split", fix="fix or regenerate it")
     frames = train["frames"]
     centers = torch.stack([c.camera_center for c in read_pose_file(data / "transforms_train.json",
                                                                    default_size=(800, 800))])
@@ -123,10 +122,10 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
         secs = run(["train.py", "-s", str(out / "data"), "-m", str(base), "--iterations", str(args.base_iterations),
                     "--overwrite", *common], args.threads, out / "logs" / "base.log")
         print(f"base model on {len(seeds)} views: {secs:.0f} s")
-    base_status = json.loads((base / model_dir.RUN_STATUS).read_text())
+    base_status = read_json(base / model_dir.RUN_STATUS)
     base_ply = model_dir.point_cloud_ply(base, args.base_iterations)
     results_path = out / "results.json"
-    results = json.loads(results_path.read_text()) if results_path.is_file() else {}
+    results = read_json(results_path, missing="none", fix="delete it to run every step again") or {}
     results["settings"] = {**vars(args), "seed_views": seeds, "candidates": len(candidates),
                            "base_test_psnr": base_status["test_psnr"]}
     for method in args.methods:
@@ -138,7 +137,7 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
                 secs = run(["recommend.py", "-m", str(base), "--candidates", str(out / "data" / "candidates.json"),
                             "-k", str(args.k), *method_args(method), "--seed", str(seed), "-o", str(rec_dir),
                             "--quiet", "--no_previews"], args.threads, out / "logs" / f"recommend_{method}_{seed}.log")
-                rec = json.loads((rec_dir / "recommendations.json").read_text())
+                rec = read_json(rec_dir / "recommendations.json")
                 row = {"picks": [candidates[pick["candidate"]] for pick in rec["picks"]],
                        "oracle_calls": rec["oracle_calls"], "recommend_seconds": secs}
             views = seeds + row.get("picks", [])
@@ -149,7 +148,7 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
                      *map(str, views), "--max_views", str(len(views)), "--views_per_step", str(args.k),
                      "--iterations", str(args.iterations), "--init_ply", str(base_ply), "--seed", str(seed),
                      "--overwrite", *common], args.threads, out / "logs" / f"continue_{method}_{seed}.log")
-                row["test_psnr"] = json.loads((model / model_dir.RUN_STATUS).read_text())["test_psnr"]
+                row["test_psnr"] = read_json(model / model_dir.RUN_STATUS)["test_psnr"]
             results[key] = row
             write_json(results_path, results)
             print(f"{key}: views {views} -> test PSNR {row['test_psnr']:.2f} dB")

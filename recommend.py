@@ -92,9 +92,8 @@ def _recommend(args: argparse.Namespace, selector, model_path: Path, out: Path, 
     """Load the model, rank the candidates, write the output folder `out` and print the summary."""
     model = load_model(model_path, args.captured, iteration=args.iteration, device=args.device,
                        white_background=args.white_background)
-    if args.fisher_mode or args.fisher_cache_mb is not None:
-        model.fisher = replace(model.fisher, mode=args.fisher_mode or model.fisher.mode,
-                               cache_mb=model.fisher.cache_mb if args.fisher_cache_mb is None else args.fisher_cache_mb)
+    overrides = {name: getattr(args, name) for name in ("fisher_mode", "fisher_cache_mb")}  # the same names
+    model.fisher = replace(model.fisher, **{name: value for name, value in overrides.items() if value is not None})
     size = _pair(args.size, "--size", int, "x")
     candidates = candidate_cameras(args.candidates, model, elevation=_pair(args.elevation, "--elevation", float, ","),
                                    radius=args.radius, size=size, fov_deg=args.fov)

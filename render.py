@@ -28,7 +28,7 @@ from tqdm import tqdm
 
 from active.uncertainty import (UNCERTAINTY_KINDS, fisherrf_information, fisherrf_map, gaussian_uncertainty,
                                 parse_uncertainty_kinds, uncertainty_map, view_information)
-from arguments import ActiveConfig, config_from_dict
+from arguments import ActiveConfig, FisherSettings, config_from_dict
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
@@ -120,8 +120,7 @@ def model_uncertainty(trained: TrainedModel, kinds: tuple[str, ...]) -> dict[str
     for kind in kinds:
         if kind == "position_variance":
             out[kind] = gaussian_uncertainty(trained.gaussians, cameras, views, trained.background, trained.settings,
-                                             sigma=active.sigma, delta_rel=active.delta_rel,
-                                             delta_abs=active.delta_abs, param_groups=active.fisher_params)
+                                             fisher=FisherSettings.from_active(active))
         elif kind == "fisherrf":
             out[kind] = fisherrf_information(trained.gaussians, cameras, views, trained.background, trained.settings)
         else:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from collections.abc import Mapping
 from typing import Any
 
 import torch
@@ -16,37 +15,13 @@ from tqdm import tqdm
 
 from active.base import Selection, SelectionContext, Selector
 from active.fisher import build_oracle
+from arguments import FisherSettings
 from gaussian_renderer import RasterSettings
 from gaussian_renderer.projection import camera_centers, look_at_point
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 
 SEED_STRIDE = 100_003  # the generator of stage s of a run with seed r is seeded with r * SEED_STRIDE + s
-
-
-@dataclass(frozen=True)
-class FisherSettings:
-    """The Fisher oracle's options (train.py's --sigma, --delta_rel, --delta_abs, --fisher_params, --fisher_mode,
-    --fisher_cache_mb)."""
-
-    sigma: float = 1.0
-    delta_rel: float = 1e-6
-    delta_abs: float = 1e-8
-    param_groups: str = "default"
-    mode: str = "cached"  # "cached" keeps what fits `cache_mb` (streams when one view does not)
-    cache_mb: int = 0  # 0: a quarter of the available memory
-
-    # ActiveConfig's (train.py's) name of each field, the one map between the two namings
-    ACTIVE_NAMES = {"sigma": "sigma", "delta_rel": "delta_rel", "delta_abs": "delta_abs",
-                    "param_groups": "fisher_params", "mode": "fisher_mode", "cache_mb": "fisher_cache_mb"}
-
-    @classmethod
-    def from_active(cls, active: Any) -> "FisherSettings":
-        """From an `arguments.ActiveConfig` (or anything with its field names), or from a mapping of them such as a
-        model directory's recorded config, where a missing name takes this class's default."""
-        if isinstance(active, Mapping):
-            return cls(**{f: active[a] for f, a in cls.ACTIVE_NAMES.items() if a in active})
-        return cls(**{f: getattr(active, a) for f, a in cls.ACTIVE_NAMES.items()})
 
 
 @dataclass
@@ -103,8 +78,7 @@ def run_selection(selector: Selector, gaussians: GaussianModel, cameras: list[Ca
     oracle = None
     if selector.uses_oracle:
         oracle = build_oracle(selector.oracle_kind, gaussians, cameras, list(train_ids), background, settings,
-                              sigma=fisher.sigma, delta_rel=fisher.delta_rel, delta_abs=fisher.delta_abs,
-                              param_groups=fisher.param_groups, mode=fisher.mode, cache_mb=fisher.cache_mb)
+                              fisher=fisher)
     generator = torch.Generator().manual_seed(seed * SEED_STRIDE + stage)
     viewmats = torch.stack([c.viewmat.cpu() for c in cameras])  # [V, 4, 4]
     bar = tqdm(total=selector.conservative_count(len(candidate_ids), k) if candidate_ids else 0,

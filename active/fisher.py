@@ -47,6 +47,7 @@ import torch
 
 from active.cover_oracle import CoverageOracle
 from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite, gram_root_factors
+from arguments import FisherSettings
 from gaussian_renderer import (RasterSettings, attribute_gram, project_and_shade, projection_jacobian,
                                seen_attribute_gram)
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
@@ -77,8 +78,9 @@ def available_memory_bytes() -> int:
 
 
 def fisher_view_blocks(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
-                       settings: RasterSettings, sigma: float = 1.0,
-                       param_groups: tuple[str, ...] = FISHER_PARAM_GROUPS["default"]) -> torch.Tensor:
+                       settings: RasterSettings, sigma: float = FisherSettings.sigma,
+                       param_groups: tuple[str, ...] = FISHER_PARAM_GROUPS[FisherSettings.fisher_params]
+                       ) -> torch.Tensor:
     """Per-Gaussian Fisher blocks of one view, H_v,i = sigma^-2 J_proj,i^T G_i J_proj,i.
 
     Returns:
@@ -90,8 +92,8 @@ def fisher_view_blocks(gaussians: GaussianModel, camera: Camera, background: tor
 
 
 def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
-                        settings: RasterSettings, sigma: float = 1.0,
-                        param_groups: tuple[str, ...] = FISHER_PARAM_GROUPS["default"],
+                        settings: RasterSettings, sigma: float = FisherSettings.sigma,
+                        param_groups: tuple[str, ...] = FISHER_PARAM_GROUPS[FisherSettings.fisher_params],
                         backend: str = "auto", dtype: torch.dtype = torch.float64) -> ViewFactors:
     """`fisher_view_blocks` over the Gaussians the view sees, as PSD factors: H_v,i = R_i R_i^T with
     R_i = sigma^-1 J_proj,i^T C_i, C_i C_i^T the PSD part of the attribute Gram G_i (`active.logdet.gram_root_factors`:
@@ -114,7 +116,7 @@ def fisher_view_factors(gaussians: GaussianModel, camera: Camera, background: to
 
 
 def fisher_view_diagonals(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
-                          settings: RasterSettings, sigma: float = 1.0,
+                          settings: RasterSettings, sigma: float = FisherSettings.sigma,
                           param_groups: tuple[str, ...] = RAW_PARAMETER_GROUPS) -> torch.Tensor:
     """The diagonals of `fisher_view_blocks`, sigma^-2 sum_pixels,channels (dI/dtheta_p)^2 per raw parameter, without
     forming the P x P blocks.
@@ -134,7 +136,7 @@ REFERENCE_DIAGONAL_GROUPS = ("means", "log_scales", "logit_opacities", "sh_dc", 
 
 
 def fisher_view_diagonals_reference(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
-                                    settings: RasterSettings, sigma: float = 1.0,
+                                    settings: RasterSettings, sigma: float = FisherSettings.sigma,
                                     param_groups: tuple[str, ...] = REFERENCE_DIAGONAL_GROUPS) -> torch.Tensor:
     """The diagonal FisherRF's code accumulates (`diff/cuda_rasterizer/backward.cu`, `renderCUDAFused` with
     `atomicAddSquare`, pixel gradient 1 on every channel, then PyTorch's activation backward), per raw parameter:
@@ -247,6 +249,9 @@ class FisherViewBlocks:
     or not (streaming). Candidates come as `ViewFactors` stored in `FACTOR_STORAGE`; with `diagonal` set it supplies
     the blocks' diagonals instead ([N, P], `fisher_view_diagonals`).
 
+    `fisher` gives sigma, the parameter groups of the factors (the diagonals' are every raw group, or FisherRF's with
+    `reference`), the starting mode and the cache budget `cache_bytes` (`--fisher_cache_mb`).
+
     Eviction when the cached views exceed `cache_bytes` (`eviction`): "priority" (default) evicts the cached view
     with the lowest priority first, the priorities being the selector's hints (`set_priority(view, bound)`: a lazy
     greedy's cached upper bound, -inf once the view is chosen; a view never hinted counts as -inf), ties and a stage
@@ -258,13 +263,13 @@ class FisherViewBlocks:
     cameras: list[Camera]
     background: torch.Tensor
     settings: RasterSettings
-    sigma: float
-    param_groups: tuple[str, ...]
-    streaming: bool
-    cache_bytes: int
+    fisher: FisherSettings
     diagonal: bool = False  # diagonals [N, P] instead of factors
     reference: bool = False  # with `diagonal`: FisherRF's code's diagonals (`fisher_view_diagonals_reference`)
     eviction: str = "priority"  # "priority" (the selector's hints, LRU without them) or "lru"
+    param_groups: tuple[str, ...] = field(init=False)  # the columns of P
+    streaming: bool = field(init=False)  # from `fisher`; switched on by `use_streaming`
+    cache_bytes: int = field(init=False)  # the cache budget (`_cache_budget` of --fisher_cache_mb)
     views_computed: int = 0  # distinct views whose blocks were computed (candidates; prior views not counted)
     fisher_passes: int = 0  # candidate views' blocks computed, recomputations included (cache misses)
     fisher_seconds: float = 0.0  # time spent computing blocks, prior included
@@ -276,6 +281,10 @@ class FisherViewBlocks:
     def __post_init__(self) -> None:
         if self.eviction not in EVICTION_POLICIES:
             raise ValueError(f"eviction must be one of {EVICTION_POLICIES}, got {self.eviction!r}")
+        diagonal_groups = REFERENCE_DIAGONAL_GROUPS if self.reference else RAW_PARAMETER_GROUPS
+        self.param_groups = diagonal_groups if self.diagonal else FISHER_PARAM_GROUPS[self.fisher.fisher_params]
+        self.streaming = self.fisher.streaming
+        self.cache_bytes = _cache_budget(self.fisher.fisher_cache_mb)
 
     def set_priority(self, view_id: int, bound: float) -> None:
         """A selector's hint: how likely `view_id` is to be asked for again (a lazy greedy's upper bound on its gain;
@@ -286,7 +295,8 @@ class FisherViewBlocks:
         """The factors (in `dtype`, computed in float64) or diagonals [N, P] of `cameras[view_id]`, timed, never
         cached."""
         t0 = time.perf_counter()
-        args = (self.gaussians, self.cameras[view_id], self.background, self.settings, self.sigma, self.param_groups)
+        args = (self.gaussians, self.cameras[view_id], self.background, self.settings, self.fisher.sigma,
+                self.param_groups)
         if self.diagonal:
             blocks = (fisher_view_diagonals_reference if self.reference else fisher_view_diagonals)(*args)
         else:
@@ -385,17 +395,15 @@ class FisherOracle(_ViewStatistics, BlockGainOracle):
 
     @classmethod
     def build(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int], background: torch.Tensor,
-              settings: RasterSettings, *, sigma: float = 1.0, delta_rel: float = 1e-6, delta_abs: float = 1e-8,
-              param_groups: str = "default", mode: str = "cached", cache_mb: int = 0,
+              settings: RasterSettings, *, fisher: FisherSettings = FisherSettings(),
               gain_weight: str = "none") -> "FisherOracle":
-        """Compute the prior from `train_views` and return an oracle over the other views of `cameras`; with
-        `gain_weight="opacity"` each Gaussian's log-det term is weighted by its opacity
+        """Compute the prior from `train_views` and return an oracle over the other views of `cameras` (all of
+        `fisher` applies); with `gain_weight="opacity"` each Gaussian's log-det term is weighted by its opacity
         (`active.base.GAIN_WEIGHTS`)."""
-        source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, FISHER_PARAM_GROUPS[param_groups],
-                                  mode == "streaming", _cache_budget(cache_mb))
+        source = FisherViewBlocks(gaussians, cameras, background, settings, fisher)
         prior = _prior(source, train_views, len(cameras))
         weights = gaussians.opacities.detach() if gain_weight == "opacity" else None
-        return cls(BlockInformation(prior, delta_rel=delta_rel, delta_abs=delta_abs), source, weights)
+        return cls(BlockInformation(prior, delta_rel=fisher.delta_rel, delta_abs=fisher.delta_abs), source, weights)
 
 
 class DiagonalGainOracle:
@@ -433,34 +441,31 @@ class DiagonalFisherOracle(_ViewStatistics, DiagonalGainOracle):
 
     @classmethod
     def build(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int], background: torch.Tensor,
-              settings: RasterSettings, *, sigma: float = 1.0, mode: str = "cached", cache_mb: int = 0,
+              settings: RasterSettings, *, fisher: FisherSettings = FisherSettings(),
               reference: bool = False) -> "DiagonalFisherOracle":
         """The prior diagonal of `train_views` and an oracle over the other views of `cameras` (with `reference`,
-        FisherRF's code's diagonal over `REFERENCE_DIAGONAL_GROUPS`)."""
-        groups = REFERENCE_DIAGONAL_GROUPS if reference else RAW_PARAMETER_GROUPS
-        source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, groups, mode == "streaming",
-                                  _cache_budget(cache_mb), diagonal=True, reference=reference)
+        FisherRF's code's diagonal over `REFERENCE_DIAGONAL_GROUPS`); of `fisher`, sigma, the mode and the cache
+        budget apply."""
+        source = FisherViewBlocks(gaussians, cameras, background, settings, fisher, diagonal=True, reference=reference)
         return cls(_prior(source, train_views, len(cameras)), source)
 
 
 def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
-                 background: torch.Tensor, settings: RasterSettings, *, sigma: float = 1.0, delta_rel: float = 1e-6,
-                 delta_abs: float = 1e-8, param_groups: str = "default", mode: str = "cached",
-                 cache_mb: int = 0) -> FisherOracle | DiagonalFisherOracle | CoverageOracle:
-    """The oracle of `kind` (a selector's `oracle_kind`): "logdet" -> `FisherOracle` (ridge and `param_groups`
+                 background: torch.Tensor, settings: RasterSettings, *, fisher: FisherSettings = FisherSettings()
+                 ) -> FisherOracle | DiagonalFisherOracle | CoverageOracle:
+    """The oracle of `kind` (a selector's `oracle_kind`): "logdet" -> `FisherOracle` (ridge and `fisher_params`
     apply), "logdet_opacity" -> the same with each Gaussian's term weighted by its opacity, "diagonal" ->
     `DiagonalFisherOracle` (every raw parameter group, no ridge), "diagonal_reference" -> the same over FisherRF's
     code's diagonal (`fisher_view_diagonals_reference`), "coverage" -> COVER's geometric `CoverageOracle` (no Fisher
     pass; the Fisher options do not apply)."""
     if kind in ("logdet", "logdet_opacity"):
-        return FisherOracle.build(gaussians, cameras, train_views, background, settings, sigma=sigma,
-                                  delta_rel=delta_rel, delta_abs=delta_abs, param_groups=param_groups, mode=mode,
-                                  cache_mb=cache_mb, gain_weight="opacity" if kind == "logdet_opacity" else "none")
+        return FisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher,
+                                  gain_weight="opacity" if kind == "logdet_opacity" else "none")
     if kind == "coverage":
         return CoverageOracle(gaussians.means, gaussians.opacities, cameras, train_views)
     if kind in ("diagonal", "diagonal_reference"):
-        return DiagonalFisherOracle.build(gaussians, cameras, train_views, background, settings, sigma=sigma,
-                                          mode=mode, cache_mb=cache_mb, reference=kind == "diagonal_reference")
+        return DiagonalFisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher,
+                                          reference=kind == "diagonal_reference")
     raise ValueError(f"unknown oracle kind {kind!r} (a selector's oracle_kind is one of {', '.join(ORACLE_KINDS)})")
 
 

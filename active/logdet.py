@@ -22,8 +22,8 @@ ratios reach ~1e10, float32 accumulation leaves negative eigenvalues ~eps * |H|)
   made (`from_blocks`: eigenvalues clamped at 0; the Fisher oracle clamps those of the 9 x 9 attribute Gram), so
   I + Y^T Y has eigenvalues >= 1 and its Cholesky cannot fail: no eigen-solve per gain. (The dense twin,
   `DenseBlockInformation`, clamps the eigenvalues of W instead; for PSD H_v both are the same number.)
-* ridge: delta_i = delta_rel * max(diag(H_0,i)) + delta_abs (defaults 1e-6 and 1e-8). The relative part makes
-  every prior block positive definite whatever its units (an eigenvalue ratio of at most ~1/delta_rel);
+* ridge: delta_i = delta_rel * max(diag(H_0,i)) + delta_abs (defaults: `arguments.FisherSettings`). The relative
+  part makes every prior block positive definite whatever its units (an eigenvalue ratio of at most ~1/delta_rel);
   the absolute floor covers Gaussians no training view sees (all-zero prior blocks);
 * each per-Gaussian term is clamped at 0 (exactly >= 0; roundoff may leave -1e-16), so a gain is finite, >= 0 and
   a continuous function of the blocks; a commit updates L <- L C with C C^T = I + Y Y^T for the blocks whose term
@@ -39,6 +39,7 @@ from typing import Callable, Union
 import torch
 
 from active import trapezoid
+from arguments import FisherSettings
 from utils.errors import UserError
 
 LOGDET_BACKENDS = ("auto", "compiled", "torch")
@@ -250,8 +251,8 @@ class BlockInformation:
     """The running information A = H_0 + ridge + sum_S H_v of a stage, with its Cholesky factor cached; gains and
     commits touch only the Gaussians a view sees (`ViewFactors`)."""
 
-    def __init__(self, prior_blocks: torch.Tensor, delta_rel: float = 1e-6, delta_abs: float = 1e-8,
-                 backend: str = "auto"):
+    def __init__(self, prior_blocks: torch.Tensor, delta_rel: float = FisherSettings.delta_rel,
+                 delta_abs: float = FisherSettings.delta_abs, backend: str = "auto"):
         """Args:
             prior_blocks: sum of the training views' Fisher blocks (any float dtype, device kept). [N, P, P]
             delta_rel: relative ridge, times the largest diagonal entry of each prior block.
@@ -325,7 +326,8 @@ class DenseBlockInformation:
     all N blocks, W = L^-1 H_v L^-T, and sums log1p(max(eig(W), 0)) from a batched symmetric eigen-solve; a commit
     updates L <- L C with C C^T = I + max(W, 0) from a QR. Tests compare the two; the benchmark times both."""
 
-    def __init__(self, prior_blocks: torch.Tensor, delta_rel: float = 1e-6, delta_abs: float = 1e-8):
+    def __init__(self, prior_blocks: torch.Tensor, delta_rel: float = FisherSettings.delta_rel,
+                 delta_abs: float = FisherSettings.delta_abs):
         self.delta_rel, self.delta_abs = float(delta_rel), float(delta_abs)
         self.matrix, self.chol = ridged_prior(prior_blocks, self.delta_rel, self.delta_abs)  # A, L [N, P, P]
         self.prior_logdet = self.logdet()

@@ -29,6 +29,7 @@ import torch
 from active.fisher import (FISHER_PARAM_GROUPS, REFERENCE_DIAGONAL_GROUPS, fisher_view_blocks, fisher_view_diagonals,
                            fisher_view_diagonals_reference, parameter_columns, summed_views)
 from active.logdet import BlockInformation
+from arguments import FisherSettings
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
@@ -37,14 +38,14 @@ from utils.model_dir import UNCERTAINTY_KINDS
 
 
 def gaussian_uncertainty(gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
-                         background: torch.Tensor, settings: RasterSettings, *, sigma: float = 1.0,
-                         delta_rel: float = 1e-6, delta_abs: float = 1e-8,
-                         param_groups: str = "default") -> torch.Tensor:
-    """u_i = trace of the means block of (H_train,i + delta_i I)^-1 for every Gaussian. [N] float64"""
-    groups = FISHER_PARAM_GROUPS[param_groups]
-    prior = summed_views(lambda v: fisher_view_blocks(gaussians, cameras[v], background, settings, sigma, groups),
-                         train_views)
-    information = BlockInformation(prior, delta_rel=delta_rel, delta_abs=delta_abs)
+                         background: torch.Tensor, settings: RasterSettings, *,
+                         fisher: FisherSettings = FisherSettings()) -> torch.Tensor:
+    """u_i = trace of the means block of (H_train,i + delta_i I)^-1 for every Gaussian (sigma, the ridge and the
+    parameter groups of `fisher`). [N] float64"""
+    groups = FISHER_PARAM_GROUPS[fisher.fisher_params]
+    prior = summed_views(lambda v: fisher_view_blocks(gaussians, cameras[v], background, settings, fisher.sigma,
+                                                      groups), train_views)
+    information = BlockInformation(prior, delta_rel=fisher.delta_rel, delta_abs=fisher.delta_abs)
     covariance = torch.cholesky_inverse(information.chol)  # A^-1 [N, P, P]
     means = parameter_columns(gaussians, groups)["means"]
     return torch.diagonal(covariance[:, means, means], dim1=-2, dim2=-1).sum(-1)

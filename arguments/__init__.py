@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import typing
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -56,6 +57,44 @@ class PipelineConfig:
 
 
 @dataclass(frozen=True)
+class FisherSettings:
+    """The Fisher oracle's options: one object from train.py's flags down to the view blocks.
+
+    The defaults are stated here only: `ActiveConfig` takes these fields by name (`same_field`), and a signature that
+    needs one default refers to it as a class attribute (e.g. `sigma: float = FisherSettings.sigma`).
+    """
+
+    sigma: float = field(default=1.0, metadata=_flag(None, "pixel noise std in the Fisher model H = J^T J / sigma^2"))
+    delta_rel: float = field(default=1e-6, metadata=_flag(
+        None, "relative ridge: delta_i = delta_rel * max diag of the prior block"))
+    delta_abs: float = field(default=1e-8, metadata=_flag(None, "absolute ridge floor added to every prior block"))
+    fisher_params: str = field(default="default", metadata=_flag(None, "Fisher parameter groups",
+                                                                 ("default", "full_sh")))
+    fisher_mode: str = field(default="cached", metadata=_flag(
+        None, "cached: keep view blocks per stage; streaming: recompute", ("cached", "streaming")))
+    fisher_cache_mb: int = field(default=0, metadata=_flag(None, "cache bound in MB (0 = a quarter of available RAM)"))
+
+    @property
+    def streaming(self) -> bool:
+        """Whether the oracle starts in streaming mode (recompute a view's information at every oracle)."""
+        return self.fisher_mode == "streaming"
+
+    @classmethod
+    def from_active(cls, active: Any) -> "FisherSettings":
+        """From an `ActiveConfig` (or anything with these field names), or from a mapping of them such as a model
+        directory's recorded "active" config (a missing name takes the default, other names are ignored)."""
+        if isinstance(active, Mapping):
+            return config_from_dict(cls, active)
+        return cls(**{f.name: getattr(active, f.name) for f in dataclasses.fields(cls)})
+
+
+def same_field(cls: type, name: str) -> Any:
+    """A dataclass field with the default and the CLI metadata of field `name` of dataclass `cls` (stated there)."""
+    source = next(f for f in dataclasses.fields(cls) if f.name == name)
+    return field(default=source.default, metadata=source.metadata)
+
+
+@dataclass(frozen=True)
 class ActiveConfig:
     """Active view selection: which selector, the acquisition schedule and the Fisher oracle."""
 
@@ -66,12 +105,12 @@ class ActiveConfig:
     max_views: int = field(default=11, metadata=_flag(None, "view budget (training views at the end)"))
     iters_per_view: int = field(default=100, metadata=_flag(None, "stage length = iters_per_view x current #views"))
     stage_reset: bool = field(default=False, metadata=_flag(None, "restart each stage from the initial point cloud (default: continue)"))
-    sigma: float = field(default=1.0, metadata=_flag(None, "pixel noise std in the Fisher model H = J^T J / sigma^2"))
-    delta_rel: float = field(default=1e-6, metadata=_flag(None, "relative ridge: delta_i = delta_rel * max diag of the prior block"))
-    delta_abs: float = field(default=1e-8, metadata=_flag(None, "absolute ridge floor added to every prior block"))
-    fisher_params: str = field(default="default", metadata=_flag(None, "Fisher parameter groups", ("default", "full_sh")))
-    fisher_mode: str = field(default="cached", metadata=_flag(None, "cached: keep view blocks per stage; streaming: recompute", ("cached", "streaming")))
-    fisher_cache_mb: int = field(default=0, metadata=_flag(None, "cache bound in MB (0 = a quarter of available RAM)"))
+    sigma: float = same_field(FisherSettings, "sigma")  # the Fisher fields: `FisherSettings.from_active`
+    delta_rel: float = same_field(FisherSettings, "delta_rel")
+    delta_abs: float = same_field(FisherSettings, "delta_abs")
+    fisher_params: str = same_field(FisherSettings, "fisher_params")
+    fisher_mode: str = same_field(FisherSettings, "fisher_mode")
+    fisher_cache_mb: int = same_field(FisherSettings, "fisher_cache_mb")
 
 
 @dataclass(frozen=True)

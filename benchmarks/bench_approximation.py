@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
-import math
 import statistics
 import time
 from pathlib import Path
@@ -35,7 +34,7 @@ from active.fisher import FISHER_PARAM_GROUPS, DiagonalGainOracle, fisher_view_b
     parameter_columns
 from active.brute_force import check_inputs, subset_rhos
 from active.logdet import BlockGainOracle, BlockInformation
-from arguments import ActiveConfig, config_from_dict
+from arguments import ActiveConfig, FisherSettings, config_from_dict
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from gaussian_renderer.projection import camera_centers, look_at_point
 from scene.trained import load_trained, recorded_train_views
@@ -61,26 +60,27 @@ def run(model: Path, candidates_count: int, ks: list[int], deltas: list[float], 
     trained = load_trained(model)
     saved = trained.record.get("active", {})
     active = config_from_dict(ActiveConfig, saved) if saved else ActiveConfig()
+    fisher = FisherSettings.from_active(active)
     cameras = trained.scene.train_cameras
     train = recorded_train_views(trained.path, trained.iteration, len(cameras), active.method)
     pool = [v for v in range(len(cameras)) if v not in train]
     if candidates_count > len(pool):
         raise UserError(f"--candidates {candidates_count}: the model leaves only {len(pool)} views outside training")
     candidates = [pool[round(i * (len(pool) - 1) / max(candidates_count - 1, 1))] for i in range(candidates_count)]
-    groups = FISHER_PARAM_GROUPS[active.fisher_params]
+    groups = FISHER_PARAM_GROUPS[fisher.fisher_params]
     g, bg, settings = trained.gaussians, trained.background, trained.settings
     t0 = time.perf_counter()
-    prior = sum(fisher_view_blocks(g, cameras[v], bg, settings, active.sigma, groups) for v in train)
-    blocks = {v: fisher_view_blocks(g, cameras[v], bg, settings, active.sigma, groups)
+    prior = sum(fisher_view_blocks(g, cameras[v], bg, settings, fisher.sigma, groups) for v in train)
+    blocks = {v: fisher_view_blocks(g, cameras[v], bg, settings, fisher.sigma, groups)
               for v in tqdm(candidates, desc="Fisher blocks", disable=quiet)}
-    diag_prior = sum(fisher_view_diagonals(g, cameras[v], bg, settings, active.sigma) for v in train)
-    diags = {v: fisher_view_diagonals(g, cameras[v], bg, settings, active.sigma) for v in candidates}
+    diag_prior = sum(fisher_view_diagonals(g, cameras[v], bg, settings, fisher.sigma) for v in train)
+    diags = {v: fisher_view_diagonals(g, cameras[v], bg, settings, fisher.sigma) for v in candidates}
     fisher_seconds = time.perf_counter() - t0
     viewmats = torch.stack([c.viewmat.cpu() for c in cameras])  # [V, 4, 4]
     centers, scene_center = camera_centers(viewmats), look_at_point(viewmats)
     rows, brute_seconds, select_seconds = [], 0.0, 0.0
     for delta, k in tqdm(list(itertools.product(deltas, ks)), desc="delta_rel x K", disable=quiet):
-        information = BlockInformation(prior, delta_rel=delta, delta_abs=active.delta_abs)
+        information = BlockInformation(prior, delta_rel=delta, delta_abs=fisher.delta_abs)
         t0 = time.perf_counter()
         rhos = subset_rhos(information, blocks, candidates, k)
         brute_seconds += time.perf_counter() - t0
@@ -92,7 +92,7 @@ def run(model: Path, candidates_count: int, ks: list[int], deltas: list[float], 
             for seed in range(seeds if name in STOCHASTIC else 1):
                 selector = build_selector(name, **options)
                 if selector.oracle_kind == "logdet":
-                    oracle = BlockGainOracle(BlockInformation(prior, delta_rel=delta, delta_abs=active.delta_abs),
+                    oracle = BlockGainOracle(BlockInformation(prior, delta_rel=delta, delta_abs=fisher.delta_abs),
                                              blocks.__getitem__)
                 else:
                     oracle = DiagonalGainOracle(diag_prior, diags.__getitem__,
@@ -113,7 +113,7 @@ def run(model: Path, candidates_count: int, ks: list[int], deltas: list[float], 
                      "ratio_min": 1.0, "normalised": 1.0, "found_opt": 1.0, "oracles": len(rhos),
                      "opt_set": list(best_set), "rho_opt": opt, "rho_mean_random": mean_random})
     return {"model": str(model), "iteration": trained.iteration, "num_gaussians": g.num_gaussians,
-            "fisher_params": active.fisher_params, "train_views": train, "candidates": candidates, "ks": ks,
+            "fisher_params": fisher.fisher_params, "train_views": train, "candidates": candidates, "ks": ks,
             "delta_rel": deltas, "seeds": seeds, "rows": rows,
             "seconds": {"total": time.perf_counter() - t_start, "fisher": fisher_seconds, "brute_force": brute_seconds,
                         "selectors": select_seconds},

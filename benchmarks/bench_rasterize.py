@@ -47,6 +47,7 @@ from gaussian_renderer.rasterize import bin_gaussians, rasterize
 from gaussian_renderer.reference import rasterize_reference
 from gaussian_renderer.settings import RasterSettings
 from utils.errors import run_cli
+from utils.io import read_json
 
 GARDEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "gsplat_garden" / "test_garden.npz"
 LEGO = Path(__file__).resolve().parents[2] / "shared" / "data" / "lego"
@@ -285,7 +286,7 @@ def run_backends_apart(args: argparse.Namespace, backends: list[str]) -> None:
                        "--ref_max_pairs", str(args.ref_max_pairs)] + \
                     (["--threads", str(args.threads)] if args.threads else [])
                 subprocess.run(cmd, check=True)
-                for row in json.loads(part.read_text())["rows"]:
+                for row in read_json(part)["rows"]:
                     runs.setdefault((row["preset"], backend), []).append(row)
     rows = []
     for (preset, backend), per_round in runs.items():

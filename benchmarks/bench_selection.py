@@ -45,6 +45,7 @@ from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from scene.trained import load_trained
 from utils.losses import photometric_loss
 from utils.errors import UserError, run_cli
+from utils.io import read_json
 
 
 RESULTS_DIR = Path(__file__).parent / "results"
@@ -299,7 +300,7 @@ def print_rows(rows: list[dict]) -> None:
 
 def report(path: Path) -> None:
     """Print the table of a results JSON written earlier by this script."""
-    res = json.loads(path.read_text())
+    res = read_json(path, fix="rerun the benchmark that wrote it")
     print(f"{path}: {res['mode']} mode, {res['gaussians']} Gaussians, {res.get('candidates', '?')} candidates, "
           f"one step {1e3 * res['train_step_s']:.1f} ms, one view's Fisher blocks {1e3 * res['fisher_view_s']:.1f} ms "
           f"({res['fisher_view_s'] / res['train_step_s']:.2f}x), one gain {1e3 * res['gain_s']:.1f} ms, "
@@ -322,7 +323,7 @@ def memory_table(args: argparse.Namespace) -> None:
                    "--methods", method, "--num_init_views", str(args.num_init_views),
                    "--num_candidates", str(pool), "--json", str(out)]
             subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-            res = json.loads(out.read_text())
+            res = read_json(out)
             row = {"M": res["candidates"], "mode": mode, "cache_mb": res["cache_mb"], "peak_rss_mb": res["peak_rss_mb"],
                    "select_s": res["rows"][0]["select_s"]}
             table.append(row)

@@ -111,8 +111,9 @@ def main() -> None:
         training_step(state, cam, run.cfg, run.background, run.settings, run.lr_schedule, run.scene.extent)
 
     from active.fisher import FisherOracle
+    from arguments import FisherSettings
     oracle = FisherOracle.build(state.gaussians, run.scene.train_cameras, state.train_views[:1], run.background,
-                                run.settings, mode="streaming")
+                                run.settings, fisher=FisherSettings(fisher_mode="streaming"))
     candidate = next(v for v in range(len(run.scene.train_cameras)) if v not in state.train_views)
 
     def fisher():

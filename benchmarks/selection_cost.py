@@ -130,11 +130,11 @@ def per_candidate(name: str, gaussians: GaussianModel, cams: list[Camera], bg: t
             continue
 
         def factors(v):
-            return fisher_view_factors(gaussians, cams[v], bg, settings, 1.0, params, dtype=FACTOR_STORAGE)
+            return fisher_view_factors(gaussians, cams[v], bg, settings, param_groups=params, dtype=FACTOR_STORAGE)
 
         prior = None  # [N, P, P], summed in place: full-SH blocks at the garden are 3.9 GB a copy
         for v in train:
-            blocks = fisher_view_factors(gaussians, cams[v], bg, settings, 1.0, params).dense()
+            blocks = fisher_view_factors(gaussians, cams[v], bg, settings, param_groups=params).dense()
             prior = blocks if prior is None else prior.add_(blocks)
             del blocks
         new = BlockInformation(prior)
@@ -167,7 +167,8 @@ def per_candidate(name: str, gaussians: GaussianModel, cams: list[Camera], bg: t
             old = DenseBlockInformation(prior)
             t_old_fisher, gains = [], []
             for v in candidates[:repeats]:
-                t, blocks = timed(lambda v=v: fisher_view_blocks(gaussians, cams[v], bg, settings, 1.0, params), 1)
+                t, blocks = timed(lambda v=v: fisher_view_blocks(gaussians, cams[v], bg, settings,
+                                                                 param_groups=params), 1)
                 t_old_fisher.append(t)
             t_old_gain, (gain_old, w) = timed(lambda: old.gain_and_whitened(blocks), 1)
             row.update({"fisher_old_s": statistics.median(t_old_fisher), "gain_old_ms": 1e3 * t_old_gain,

@@ -5,7 +5,6 @@ PSNR-vs-views plot. Each (method, seed) writes OUT/METHOD/seedS/loop.json."""
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import shutil
 import sys
@@ -22,7 +21,7 @@ from scene.cameras import look_at
 from scene.frames import GL_TO_CV
 from utils import model_dir
 from utils.image import save_image
-from utils.io import write_json
+from utils.io import read_json, write_json
 
 
 def capture(dataset: Path, viewmats: list[torch.Tensor], resolution: int, seed: int, start: int) -> list[dict]:
@@ -48,7 +47,7 @@ def train(dataset: Path, model: Path, iterations: int, seed: int, max_gaussians:
            str(iterations), "--seed", str(seed), "--max_gaussians", str(max_gaussians), "--quiet", "--overwrite",
            "--densify_from_iter", "100", "--densification_interval", "50"]
     subprocess.run(cmd, check=True, cwd=root, capture_output=True, text=True)
-    return json.loads((model / model_dir.RUN_STATUS).read_text())["test_psnr"]
+    return read_json(model / model_dir.RUN_STATUS)["test_psnr"]
 
 
 def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dict:
@@ -98,7 +97,8 @@ def plot(root: Path, png: Path) -> None:
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6, 4))
     for method_dir in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("builtin")):
-        runs = [json.loads(p.read_text()) for p in sorted(method_dir.glob("seed*/loop.json"))]
+        runs = [read_json(p, fix="rerun scripts/capture_loop.py to write it again")
+                for p in sorted(method_dir.glob("seed*/loop.json"))]
         if not runs:
             continue
         views = [r["views"] for r in runs[0]["rounds"]]

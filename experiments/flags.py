@@ -7,8 +7,9 @@ from pathlib import Path
 from typing import Any
 
 from experiments.grid_config import GridConfig
-from experiments.jobs import JobSpec, read_json
+from experiments.jobs import JobSpec
 from utils.errors import UserError
+from utils.io import read_json
 from utils.model_dir import CFG_ARGS
 
 RECORD = "grid.json"
@@ -22,8 +23,8 @@ GRID_FLAG = {"resolution": "--resolution", "num_random_points": "--num_points", 
 
 def check_flags(cfg: GridConfig, specs: list[JobSpec]) -> None:
     """Refuse an output directory holding runs made with other flags (grid.json, then each run's cfg_args)."""
-    record = read_json(cfg.setup_dir / RECORD)
-    if isinstance(record, dict):
+    record = read_json(cfg.setup_dir / RECORD, missing="none", damaged="none")  # damaged: nothing to compare with
+    if record is not None:
         for key, value in cfg.record().items():
             if key in record and record[key] != value:
                 flag = "-- (extra train.py flags)" if key == "train_args" else f"--{key}"
@@ -38,8 +39,8 @@ def check_flags(cfg: GridConfig, specs: list[JobSpec]) -> None:
     from training.config import parse_config  # the exact config train.py resolves from the same flags
     any_selector_option = {o for m in list_selectors() for o in selector_options(m)}
     for spec, run in started:
-        saved = read_json(Path(spec.model_dir) / CFG_ARGS)
-        if not isinstance(saved, dict):
+        saved = read_json(Path(spec.model_dir) / CFG_ARGS, missing="none", damaged="none")
+        if saved is None:
             continue  # unreadable: train.py itself reports it
         expected = parse_config([*spec.train_args, "--device", "cpu"]).to_dict()
         for group, values in expected.items():

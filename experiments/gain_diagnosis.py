@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +19,7 @@ import torch
 
 from active.cover_oracle import CoverageOracle, frustum_directions, pixel_coordinates
 from active.fisher import FisherOracle
+from arguments import FisherSettings
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 from utils.uncertainty_metrics import spearman
@@ -63,17 +65,16 @@ def _rank_correlation(x: list[float], y: list[float]) -> float:
 
 
 def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[int], candidate_ids: list[int],
-             background: torch.Tensor, settings: Any, *, sigma: float = 1.0, delta_rel: float = 1e-6,
-             delta_abs: float = 1e-8, param_groups: str = "default", top: int = 8,
+             background: torch.Tensor, settings: Any, *, fisher: FisherSettings = FisherSettings(), top: int = 8,
              names: dict[int, str] | None = None) -> dict[str, Any]:
     """The breakdown of every candidate's first-pick log-det gain over its Gaussians, the spread of the gains, and
     the rank correlation with the opacity-weighted gain and COVER's gain. Returns a JSON-able dict; the per-Gaussian
     gains of the top pick are under the private key "_top_terms" ([N] tensor)."""
-    oracle = FisherOracle.build(gaussians, cameras, train_ids, background, settings, sigma=sigma,
-                                delta_rel=delta_rel, delta_abs=delta_abs, param_groups=param_groups, mode="streaming")
+    oracle = FisherOracle.build(gaussians, cameras, train_ids, background, settings,
+                                fisher=replace(fisher, fisher_mode="streaming"))
     prior = oracle.information.prior_matrix  # H0 + ridge [N, P, P]
     diag_max = torch.diagonal(prior, dim1=-2, dim2=-1).amax(-1).cpu()
-    prior_seen = diag_max > delta_abs * (1 + 1e-6) + 1e-300  # an all-zero prior block holds only the ridge
+    prior_seen = diag_max > fisher.delta_abs * (1 + 1e-6) + 1e-300  # an all-zero prior block holds only the ridge
     groups = gaussian_groups(gaussians, cameras, train_ids, prior_seen)
     opacity = gaussians.opacities.detach().double().cpu().reshape(-1)
     cover = CoverageOracle(gaussians.means, gaussians.opacities, cameras, train_ids)
@@ -210,10 +211,8 @@ def run(model: str | Path, candidates: str, out: str | Path, *, top: int = 8, wi
     from utils.io import write_json
     loaded = load_model(model)
     pool = make_pool(loaded, candidate_cameras(candidates, loaded), width)
-    f = loaded.fisher
     d = diagnose(loaded.gaussians, pool.cameras, pool.train_ids, pool.candidate_ids, loaded.background,
-                 loaded.settings, sigma=f.sigma, delta_rel=f.delta_rel, delta_abs=f.delta_abs,
-                 param_groups=f.param_groups, top=top, names=pool.names)
+                 loaded.settings, fisher=loaded.fisher, top=top, names=pool.names)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     terms = d.pop("_top_terms")

@@ -21,19 +21,11 @@ from typing import Any
 
 from submitit.helpers import Checkpointable
 
-from utils.io import atomic_write
+from utils.io import atomic_write, read_json
 from utils.model_dir import CFG_ARGS, CHECKPOINTS_DIR, RESULTS, RUN_STATUS, method_name, render_dir
 
 log = logging.getLogger(__name__)
 THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")  # torch, BLAS and numba thread pools
-
-
-def read_json(path: Path) -> Any:
-    """The parsed file, or None when it is missing, unreadable or not valid JSON."""
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
 
 
 JOB_TIMES = "grid_job_seconds.json"  # in a run's directory: one record per grid job invocation that ran a step
@@ -42,8 +34,7 @@ JOB_TIMES = "grid_job_seconds.json"  # in a run's directory: one record per grid
 def record_job_time(model_dir: Path, seconds: float, state: str) -> None:
     """Append this invocation's wall seconds (train + render + metrics steps it ran) to the run's JOB_TIMES, so a
     run resumed by a later grid invocation keeps the time of every attempt."""
-    records = read_json(model_dir / JOB_TIMES)
-    records = records if isinstance(records, list) else []
+    records = read_json(model_dir / JOB_TIMES, missing="none", damaged="none", kind=list) or []  # damaged: anew
     records.append({"seconds": round(seconds, 3), "state": state, "ended": time.strftime("%Y-%m-%d %H:%M:%S")})
     text = json.dumps(records, indent=1)
     atomic_write(model_dir / JOB_TIMES, lambda tmp: Path(tmp).write_text(text))
@@ -51,8 +42,8 @@ def record_job_time(model_dir: Path, seconds: float, state: str) -> None:
 
 def recorded_job_seconds(model_dir: Path) -> float | None:
     """Wall seconds of every grid job invocation that worked on the run (JOB_TIMES), None without a record."""
-    records = read_json(model_dir / JOB_TIMES)
-    if not isinstance(records, list):
+    records = read_json(model_dir / JOB_TIMES, missing="none", damaged="none", kind=list)
+    if records is None:
         return None
     seconds = [r["seconds"] for r in records if isinstance(r, dict) and isinstance(r.get("seconds"), (int, float))]
     return float(sum(seconds)) if seconds else None
@@ -60,8 +51,8 @@ def recorded_job_seconds(model_dir: Path) -> float | None:
 
 def trained_iteration(model_dir: Path) -> int | None:
     """The final iteration when run_status.json says the training is complete, else None."""
-    status = read_json(model_dir / RUN_STATUS)
-    if isinstance(status, dict) and status.get("status") == "complete":
+    status = read_json(model_dir / RUN_STATUS, missing="none", damaged="none")  # damaged: not complete
+    if status is not None and status.get("status") == "complete":
         return int(status.get("iteration", -1))
     return None
 
@@ -70,8 +61,8 @@ def is_finished(model_dir: Path, uncertainty: bool = False) -> bool:
     """Trained, rendered and scored: results.json holds the final iteration's entry (with `uncertainty`, one that
     carries the uncertainty metrics)."""
     iteration = trained_iteration(model_dir)
-    results = read_json(model_dir / RESULTS)
-    entry = results.get(method_name(iteration)) if iteration is not None and isinstance(results, dict) else None
+    results = read_json(model_dir / RESULTS, missing="none", damaged="none")  # damaged: not scored
+    entry = results.get(method_name(iteration)) if iteration is not None and results is not None else None
     return isinstance(entry, dict) and (not uncertainty or "uncertainty_object_region" in entry)
 
 

@@ -7,8 +7,8 @@ from pathlib import Path
 from typing import Any
 
 from experiments.grid_config import GridConfig
-from experiments.jobs import JobSpec, is_finished, read_json, train_command
-from utils.io import write_json
+from experiments.jobs import JobSpec, is_finished, train_command
+from utils.io import read_json, write_json
 from utils.model_dir import RUN_STATUS
 
 log = logging.getLogger(__name__)
@@ -72,8 +72,8 @@ class Tracker:
         for job in self.jobs.values():
             if job["state"] != "running":
                 continue
-            status = read_json(Path(job["model_dir"]) / RUN_STATUS)
-            if not (isinstance(status, dict) and status.get("status") == "running" and "iteration" in status):
+            status = read_json(Path(job["model_dir"]) / RUN_STATUS, missing="none", damaged="none")
+            if not (status is not None and status.get("status") == "running" and "iteration" in status):
                 continue
             job["progress"] = {k: status.get(k) for k in ("iteration", "total_iterations", "num_gaussians",
                                                           "updated")}

@@ -4,7 +4,6 @@ runs of the project's CLIs (`run`), the loop over methods and seeds on a seed-vi
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import subprocess
@@ -12,14 +11,12 @@ import sys
 import time
 from pathlib import Path
 
-import torch
-
 from experiments.jobs import THREAD_VARS
 from experiments.seed_dataset import make_seed_dataset
 from utils import model_dir
 from utils.checkpoint import RunDirectory
 from utils.errors import UserError
-from utils.io import write_json
+from utils.io import read_json, write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -89,10 +86,10 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
                     str(args.base_iterations), "--overwrite", *seed_data.seed_flags, *common], args.threads,
                    out / "logs" / "base.log")
         print(f"base model on {len(seeds)} views: {secs:.0f} s")
-    base_status = json.loads((base / model_dir.RUN_STATUS).read_text())
+    base_status = read_json(base / model_dir.RUN_STATUS)
     base_ply = model_dir.point_cloud_ply(base, args.base_iterations)
     results_path = out / "results.json"
-    results = json.loads(results_path.read_text()) if results_path.is_file() else {}
+    results = read_json(results_path, missing="none", fix="delete it to run every step again") or {}
     results["settings"] = {**vars(args), "seed_views": seeds, "candidates": len(candidates),
                            "base_test_psnr": base_status["test_psnr"], **({"seed_data": seed_data.note}
                                                                           if seed_data.note else {})}
@@ -105,7 +102,7 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
                 secs = run(["recommend.py", "-m", str(base), "--candidates", str(seed_data.candidate_poses),
                             "-k", str(args.k), *method_args(method), "--seed", str(seed), "-o", str(rec_dir),
                             "--quiet", "--no_previews"], args.threads, out / "logs" / f"recommend_{method}_{seed}.log")
-                rec = json.loads((rec_dir / "recommendations.json").read_text())
+                rec = read_json(rec_dir / "recommendations.json")
                 row = {"picks": [candidates[pick["candidate"]] for pick in rec["picks"]],
                        "oracle_calls": rec["oracle_calls"], "recommend_seconds": secs}
             views = seeds + row.get("picks", [])
@@ -117,7 +114,7 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
                      "--iterations", str(args.iterations), "--init_ply", str(base_ply), "--seed", str(seed),
                      "--overwrite", *seed_data.full_flags, *common], args.threads,
                     out / "logs" / f"continue_{method}_{seed}.log")
-                row["test_psnr"] = json.loads((model / model_dir.RUN_STATUS).read_text())["test_psnr"]
+                row["test_psnr"] = read_json(model / model_dir.RUN_STATUS)["test_psnr"]
             results[key] = row
             write_json(results_path, results)
             print(f"{key}: views {views} -> test PSNR {row['test_psnr']:.2f} dB")

@@ -9,7 +9,6 @@ nothing: sequential matching links only neighbouring images, and farthest-point 
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,7 +20,7 @@ from scene import colmap_io
 from scene.frames import LLFFHOLD, held_out
 from scene.pose_files import read_pose_file
 from utils.errors import UserError
-from utils.io import write_json
+from utils.io import read_json, write_json
 
 IMAGE_EXTENSIONS = (".png", ".jpg", "")  # a Blender frame's file_path names its image without (or with) one
 MIN_SEED_OBSERVATIONS = 1  # a kept SfM point is observed by this many seed images
@@ -59,8 +58,8 @@ def _link(src: Path, dst: Path) -> None:
 
 
 def _blender_seed_dataset(data: Path, folder: Path, num_seed: int) -> SeedDataset:
-    train = json.loads((data / "transforms_train.json").read_text())
-    test = json.loads((data / "transforms_test.json").read_text())
+    train = read_json(data / "transforms_train.json", what="dataset split", fix="fix or regenerate it")
+    test = read_json(data / "transforms_test.json", what="dataset split", fix="fix or regenerate it")
     frames = train["frames"]
     centers = torch.stack([c.camera_center for c in read_pose_file(data / "transforms_train.json",
                                                                    default_size=(800, 800))])

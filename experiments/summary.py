@@ -12,24 +12,22 @@ selection.json records.
 from __future__ import annotations
 
 import csv
-import json
-import logging
 import re
 import shlex
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 from statistics import mean, stdev
+from typing import Any
 
 from active.oracle_counts import exhaustive_count, mean_rounded_up
 from experiments.flags import RECORD as GRID_RECORD
 from experiments.jobs import recorded_job_seconds
 from experiments.progress import STATUS as GRID_STATUS
 from utils.errors import UserError
-from utils.io import atomic_write
+from utils.io import atomic_write, read_json
 from utils.model_dir import CAMERAS, CFG_ARGS, METHOD_PATTERN, RESULTS, RUN_STATUS, SELECTION
 
-log = logging.getLogger(__name__)
 MARKERS = (SELECTION, RUN_STATUS, CFG_ARGS)  # any of these makes a directory a run
 
 
@@ -66,13 +64,9 @@ class Run:
         return " ".join(part for part in (self.method, f"K={self.k}", self.options_label) if part)
 
 
-def _read_json(path: Path):
-    """Parsed JSON, or None (with a warning) when the file is unreadable or truncated."""
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        log.warning("skipping unreadable %s (%s)", path, type(exc).__name__)
-        return None
+def _read_json(path: Path, kind: type = dict) -> Any:
+    """A run's or grid's file, None when it is missing or damaged (then with a warning): a summary skips it."""
+    return read_json(path, missing="none", damaged="warn", kind=kind)
 
 
 def _layout(model: Path) -> tuple[str, str]:
@@ -87,8 +81,8 @@ def _layout(model: Path) -> tuple[str, str]:
 def load_run(model: Path) -> Run:
     """Read one model directory; never raises for missing or unreadable pieces (they become `problem`)."""
     setup, scene = _layout(model)
-    sel = _read_json(model / SELECTION) if (model / SELECTION).is_file() else None
-    cfg_args = _read_json(model / CFG_ARGS) if (model / CFG_ARGS).is_file() else None
+    sel = _read_json(model / SELECTION)
+    cfg_args = _read_json(model / CFG_ARGS)
     if isinstance(sel, dict) and isinstance(sel.get("config"), dict):
         cfg = sel["config"]
     elif isinstance(cfg_args, dict):
@@ -103,9 +97,8 @@ def load_run(model: Path) -> Run:
         run.final = sel.get("final")
         sessions = sel.get("sessions")
         run.sessions = [s for s in sessions if isinstance(s, dict)] if isinstance(sessions, list) else []
-    cameras = _read_json(model / CAMERAS) if (model / CAMERAS).is_file() else None
-    run.cameras = cameras if isinstance(cameras, list) else []
-    results = _read_json(model / RESULTS) if (model / RESULTS).is_file() else None
+    run.cameras = _read_json(model / CAMERAS, list) or []
+    results = _read_json(model / RESULTS)
     entries = {k: v for k, v in (results or {}).items() if METHOD_PATTERN.fullmatch(k) and isinstance(v, dict)}
     if (model / SELECTION).is_file() and not isinstance(sel, dict):
         run.problem = "no readable selection.json (truncated or not valid JSON)"
@@ -114,7 +107,7 @@ def load_run(model: Path) -> Run:
     elif not cfg:
         run.problem = "no readable selection.json or cfg_args"
     else:
-        status = _read_json(model / RUN_STATUS) if (model / RUN_STATUS).is_file() else None
+        status = _read_json(model / RUN_STATUS)
         run.problem = f"no results.json ({_training_state(status, len(run.stages))})"
     return run
 
@@ -164,8 +157,7 @@ def grid_dir_of(run: Run) -> Path | None:
 
 def _grid_status(grid_dir: Path) -> dict:
     """grid_status.json of a grid ({} when it is missing or unreadable)."""
-    status = _read_json(grid_dir / GRID_STATUS) if (grid_dir / GRID_STATUS).is_file() else None
-    return status if isinstance(status, dict) else {}
+    return _read_json(grid_dir / GRID_STATUS) or {}
 
 
 def done_job_seconds(status: dict) -> dict[Path, float]:

@@ -22,6 +22,7 @@ from typing import Any
 import torch
 
 from active.uncertainty import gaussian_uncertainty, uncertainty_map
+from arguments import config_to_dict
 from gaussian_renderer import render
 from recommender.candidates import CaptureFrame
 from recommender.pipeline import LoadedModel, Recommendation
@@ -84,9 +85,7 @@ def recommendation_record(rec: Recommendation, model: LoadedModel, candidates_sp
         "seconds": seconds,
         "settings": {"seed": rec.seed, "device": device, "width": pool.cameras[pool.candidate_ids[0]].width,
                      "background": model.background.cpu().tolist(),
-                     "fisher": {"sigma": model.fisher.sigma, "delta_rel": model.fisher.delta_rel,
-                                "delta_abs": model.fisher.delta_abs, "param_groups": model.fisher.param_groups,
-                                "mode": model.fisher.mode, "cache_mb": model.fisher.cache_mb},
+                     "fisher": config_to_dict(model.fisher),
                      "raster": {"tile_size": model.settings.tile_size, "backend": model.settings.backend}},
         "provenance": environment_record(device=device),
         "notes": rec.notes,
@@ -113,8 +112,7 @@ def write_previews(rec: Recommendation, model: LoadedModel, folder: Path) -> Non
 
     pool = rec.pool
     u = gaussian_uncertainty(model.gaussians, pool.cameras, pool.train_ids, model.background, model.settings,
-                             sigma=model.fisher.sigma, delta_rel=model.fisher.delta_rel,
-                             delta_abs=model.fisher.delta_abs, param_groups=model.fisher.param_groups)
+                             fisher=model.fisher)
     maps = []
     for r, v in enumerate(rec.picks):
         camera = pool.cameras[v]

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import torch
 
-from active.acquisition import Acquisition, FisherSettings, run_selection
+from active.acquisition import Acquisition, run_selection
 from active.base import Selector
-from arguments import ModelConfig, PipelineConfig
+from arguments import FisherSettings, ModelConfig, PipelineConfig
 from gaussian_renderer import RasterSettings, project_gaussians
 from recommender.advice import selection_advice
 from recommender.candidates import generate, parse_spec

@@ -1,13 +1,13 @@
 """Cameras as the reports and the viewer draw them: pose, intrinsics, group, colour, label; frustum geometry."""
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from utils.errors import UserError
+from utils.io import read_json
 
 
 @dataclass
@@ -31,14 +31,14 @@ def read_cameras_json(path: Path) -> list[dict]:
     """The entries of a 3DGS cameras.json (id, img_name, width, height, position, rotation, fx, fy).
 
     Raises:
-        UserError: unreadable JSON or entries without a pose.
+        UserError: a missing or damaged file (not a JSON list) or entries without a pose.
     """
+    entries = read_json(path, kind=list, fix="rerun train.py to rewrite it")
     try:
-        entries = json.loads(Path(path).read_text())
         for e in entries:
             e["position"] = np.asarray(e["position"], dtype=np.float64).reshape(3)
             e["rotation"] = np.asarray(e["rotation"], dtype=np.float64).reshape(3, 3)
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError) as exc:
         raise UserError(f"cannot read {path} ({type(exc).__name__}: {exc}); rerun train.py to rewrite it") from None
     return entries
 

@@ -8,8 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from reports.run_data import latest, read_json
+from reports.run_data import latest
 from utils.errors import UserError
+from utils.io import read_json
 from utils.model_dir import CFG_ARGS, RESULTS, RUN_STATUS, SELECTION
 
 _SEED = re.compile(r"seed(\d+)")
@@ -33,9 +34,9 @@ class GridRun:
 
 def read_run(path: Path, scene: str, tag: str, seed: int) -> GridRun:
     """A `GridRun` from a model directory."""
-    selection = read_json(path / SELECTION) or {}
-    status = read_json(path / RUN_STATUS) or {}
-    results_all = read_json(path / RESULTS) or {}
+    selection = read_json(path / SELECTION, missing="none") or {}
+    status = read_json(path / RUN_STATUS, missing="none") or {}
+    results_all = read_json(path / RESULTS, missing="none") or {}
     key = latest([Path(k) for k in results_all])
     results = results_all[key.name] if key is not None else None
     stages = selection.get("stages", [])

@@ -109,6 +109,17 @@ class Page:
         """A highlighted line; kind 'note' (blue) or 'warn' (orange)."""
         self.add(f"<div class='{kind}'>{esc(text)}</div>")
 
+    def absent(self, items: Iterable[str]) -> None:
+        """One warning box per piece of the report's data that is missing ("absent: ...")."""
+        for item in items:
+            self.box(f"absent: {item}", "warn")
+
+    def scene(self, note: str, fig: go.Figure) -> None:
+        """The "Scene and cameras" section: its note and the 3D figure (`reports.figures.scene_figure`)."""
+        self.heading("Scene and cameras")
+        self.paragraph(note, "small")
+        self.figure(fig, "scene3d")
+
     def table(self, headers: Iterable[str], rows: Iterable[Iterable[object]], raw: bool = False) -> None:
         """A table; cells are escaped unless `raw`."""
         cell = (lambda v: str(v)) if raw else esc

@@ -21,8 +21,9 @@ import numpy as np
 
 from reports import colors
 from reports.cameras import CameraView, camera_from_entry, read_cameras_json
-from reports.run_data import gaussian_points, latest, read_json
+from reports.run_data import gaussian_points, latest
 from utils.errors import UserError
+from utils.io import read_json
 from utils.model_dir import CAMERAS, CFG_ARGS, POINT_CLOUD_DIR, POINT_CLOUD_PLY
 
 FILE = "recommendations.json"
@@ -69,7 +70,7 @@ def captured_cameras(record: dict[str, Any], absent: list[str]) -> list[CameraVi
     model = Path(str(record.get("model", "")))
     ids = (record.get("prior") or {}).get("view_ids")
     if ids and (model / CAMERAS).is_file():
-        num_test = int(((read_json(model / CFG_ARGS) or {}).get("dataset") or {}).get("num_test", 0))
+        num_test = int(((read_json(model / CFG_ARGS, missing="none") or {}).get("dataset") or {}).get("num_test", 0))
         entries = read_cameras_json(model / CAMERAS)
         return [camera_from_entry(entries[num_test + v], "captured views", colors.SEED, info={"view": v})
                 for v in ids if num_test + v < len(entries)]
@@ -100,7 +101,7 @@ def gather_recommendation(folder: str | Path) -> RecommendationData:
         UserError: no recommendations.json, damaged JSON, or picks without poses.
     """
     folder = Path(folder)
-    record = read_json(folder / FILE)
+    record = read_json(folder / FILE, missing="none")
     if not isinstance(record, dict) or not isinstance(record.get("picks"), list):
         raise UserError(f"{folder / FILE} is absent or has no 'picks' list; pass an output folder of recommend.py")
     absent: list[str] = []

@@ -27,12 +27,9 @@ def write_recommendation_report(out_dir: str | os.PathLike, out: str | os.PathLi
     page.paragraph(f"{data.folder.resolve()}; model {rec.get('model', '–')}", "small")
     for note in rec.get("notes") or []:
         page.box(str(note), "note")
-    for item in data.absent:
-        page.box(f"absent: {item}", "warn")
-    page.heading("Scene and cameras")
-    page.paragraph(f"{data.points_note}; picks numbered by rank; candidates coloured by their evaluated gain "
-                   "(grey: not evaluated).", "small")
-    page.figure(scene_figure(data.points, data.point_colors, data.cameras), "scene3d")
+    page.absent(data.absent)
+    page.scene(f"{data.points_note}; picks numbered by rank; candidates coloured by their evaluated gain (grey: not "
+               "evaluated).", scene_figure(data.points, data.point_colors, data.cameras))
 
     page.heading("Picks")
     rows = [[p.get("rank", "–"), p.get("name", "–"), p.get("candidate", "–"),

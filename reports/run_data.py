@@ -6,7 +6,6 @@ run_status.json, point_cloud/iteration_N/point_cloud.ply, test/ours_N/{renders,g
 """
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +16,7 @@ import numpy as np
 from reports import colors
 from reports.cameras import CameraView, camera_from_entry, read_cameras_json
 from utils.errors import UserError
+from utils.io import read_json
 from utils.model_dir import (CAMERAS, CFG_ARGS, INPUT_PLY, PER_VIEW, POINT_CLOUD_DIR, POINT_CLOUD_PLY, RESULTS, RUN_STATUS,
                              SELECTION)
 
@@ -75,21 +75,6 @@ class RunData:
         elif final and final.get("test_psnr") is not None:
             points.append((views, float(final["test_psnr"]), "final (train.py)"))
         return points
-
-
-def read_json(path: Path) -> Any | None:
-    """Parsed JSON, None when the file is absent.
-
-    Raises:
-        UserError: the file exists but is not valid JSON.
-    """
-    if not path.is_file():
-        return None
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise UserError(f"cannot read {path} ({type(exc).__name__}: {exc}); it is damaged, rerun the step that "
-                        "writes it") from None
 
 
 def latest(paths: list[Path]) -> Path | None:
@@ -202,7 +187,7 @@ def gather_run(model_dir: str | Path) -> RunData:
     model_dir = Path(model_dir)
     if not model_dir.is_dir():
         raise UserError(f"{model_dir} is not a directory; pass -m MODEL_DIR written by train.py")
-    cfg = read_json(model_dir / CFG_ARGS)
+    cfg = read_json(model_dir / CFG_ARGS, missing="none")
     cam_entries = read_cameras_json(model_dir / CAMERAS) if (model_dir / CAMERAS).is_file() else None
     if cfg is None and cam_entries is None:
         raise UserError(f"{model_dir} holds neither {CFG_ARGS} nor {CAMERAS}, so it is not a model directory "
@@ -210,11 +195,11 @@ def gather_run(model_dir: str | Path) -> RunData:
     absent: list[str] = []
     if cfg is None:
         absent.append(f"{CFG_ARGS} (the run's settings)")
-    selection = read_json(model_dir / SELECTION)
+    selection = read_json(model_dir / SELECTION, missing="none")
     if selection is None:
         absent.append(f"{SELECTION} (no active selection: a run trained on all its views, or a run stopped "
                       "before its first acquisition)")
-    status = read_json(model_dir / RUN_STATUS)
+    status = read_json(model_dir / RUN_STATUS, missing="none")
     num_test = int((cfg or {}).get("dataset", {}).get("num_test", 0))
     if cam_entries is None:
         absent.append(f"{CAMERAS} (no cameras drawn)")
@@ -232,8 +217,8 @@ def gather_run(model_dir: str | Path) -> RunData:
         xyz, rgb, note = np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8), "no points"
         absent.append(f"{POINT_CLOUD_DIR}/ and {INPUT_PLY} (no points drawn)")
 
-    results_all = read_json(model_dir / RESULTS)
-    per_view_all = read_json(model_dir / PER_VIEW) or {}
+    results_all = read_json(model_dir / RESULTS, missing="none")
+    per_view_all = read_json(model_dir / PER_VIEW, missing="none") or {}
     method_dir = latest([d for d in (model_dir / "test").glob("ours_*") if (d / "renders").is_dir()])
     method_key = method_dir.name if method_dir is not None else None
     results = None

@@ -84,13 +84,11 @@ def build_run_page(run: RunData) -> Page:
     page.paragraph(str(run.model_dir.resolve()), "small")
     if run.incomplete:
         page.box(run.incomplete, "warn")
-    for item in run.absent:
-        page.box(f"absent: {item}", "warn")
+    page.absent(run.absent)
 
-    page.heading("Scene and cameras")
-    page.paragraph(f"{run.points_note}; {len(run.cameras)} cameras. Picks are numbered in pick order and coloured "
-                   "by stage; drag to rotate, scroll to zoom, click a legend entry to hide a group.", "small")
-    page.figure(scene_figure(run.points, run.point_colors, run.cameras), "scene3d")
+    page.scene(f"{run.points_note}; {len(run.cameras)} cameras. Picks are numbered in pick order and coloured by "
+               "stage; drag to rotate, scroll to zoom, click a legend entry to hide a group.",
+               scene_figure(run.points, run.point_colors, run.cameras))
     if run.selection:
         page.paragraph(f"{SELECTION} records the gains of the picks only; candidates not picked are grey.", "small")
 

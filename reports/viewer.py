@@ -14,8 +14,9 @@ from gaussian_renderer.projection import covariance_3d
 from reports import colors
 from reports.cameras import CameraView, frustum_depth, read_cameras_json
 from reports.images import open_rgb
-from reports.run_data import latest, read_json, run_cameras
+from reports.run_data import latest, run_cameras
 from scene.trained import TrainedModel
+from utils.io import read_json
 from utils.model_dir import CAMERAS, SELECTION
 
 log = logging.getLogger(__name__)
@@ -60,7 +61,7 @@ def splat_arrays(trained: TrainedModel) -> dict[str, np.ndarray]:
 def viewer_cameras(trained: TrainedModel) -> list[CameraView]:
     """The run's cameras grouped and coloured as in its report (test cameras first, then training views)."""
     entries = read_cameras_json(trained.path / CAMERAS)
-    selection = read_json(trained.path / SELECTION)
+    selection = read_json(trained.path / SELECTION, missing="none")
     return run_cameras(entries, len(trained.scene.test_cameras), selection)
 
 

@@ -9,7 +9,6 @@ Deterministic for a given seed, so the README's main command needs no download.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
 from pathlib import Path
@@ -21,7 +20,7 @@ from scene.cameras import look_at
 from scene.dataset_readers import GL_TO_CV
 from utils.errors import UserError, run_cli
 from utils.image import save_image
-from utils.io import write_json
+from utils.io import read_json, write_json
 
 CAMERA_RADIUS = 4.0
 CAMERA_ANGLE_X = 0.6911  # NeRF-synthetic field of view
@@ -82,14 +81,6 @@ def hemisphere_positions(count: int, offset: float) -> torch.Tensor:
                                         torch.cos(elevation) * torch.sin(azimuth), torch.sin(elevation)], 1)
 
 
-def _read_stamp(stamp: Path) -> dict | None:
-    """The parameters recorded by a finished generation, or None (absent or unreadable: regenerate)."""
-    try:
-        return json.loads(stamp.read_text())
-    except (OSError, ValueError):
-        return None
-
-
 def scene_gaussians(seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """The scene as rasterizer inputs: means [N,3], quats [N,4], scales [N,3], opacities [N], colours [N,3]."""
     means, colors, scales = _object_points(torch.Generator().manual_seed(seed))
@@ -143,7 +134,7 @@ def make_builtin_scene(out_dir: str | Path, seed: int = 0, resolution: int = 128
     if num_train < 1 or num_test < 1:
         raise UserError(f"--num_train and --num_test must be at least 1, got {num_train} and {num_test}")
     stamp = out / STAMP
-    if _read_stamp(stamp) == params:
+    if read_json(stamp, missing="none", damaged="none") == params:  # absent or damaged: regenerate
         log.info("built-in scene already in %s", out)
         return out
     stamp.unlink(missing_ok=True)  # a crash part-way must not leave a stamp that claims a complete scene

@@ -9,7 +9,6 @@ with OpenCV (`scene.lens.distortion_maps`), so the lens is known exactly. Determ
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
 from pathlib import Path
@@ -25,7 +24,7 @@ from scene.cameras import look_at
 from scene.frames import GL_TO_CV
 from scene.lens import Lens, distortion_maps, pixel_grid, undistort_points
 from utils.errors import UserError, run_cli
-from utils.io import write_json
+from utils.io import read_json, write_json
 
 DISTORTION = {"k1": -0.12, "k2": 0.03, "p1": 0.001, "p2": -0.0015}  # a wide phone lens, barrel
 FOCAL_PER_HEIGHT = 0.75  # fx = fy = 0.75 x image height: a ~67 degree vertical field, as a phone's main camera
@@ -87,12 +86,9 @@ def make_phone_capture(out_dir: str | Path, width: int = 1080, height: int = 192
     if num_frames < 2 or not 0 <= missing < num_frames - 1:
         raise UserError(f"need --frames >= 2 and 0 <= --missing < frames - 1, got {num_frames} and {missing}")
     stamp = out / STAMP
-    try:
-        if json.loads(stamp.read_text()) == params:
-            log.info("phone capture already in %s", out)
-            return out
-    except (OSError, ValueError):
-        pass
+    if read_json(stamp, missing="none", damaged="none") == params:  # absent or damaged: capture again
+        log.info("phone capture already in %s", out)
+        return out
     stamp.unlink(missing_ok=True)
     gaussians = scene_gaussians(seed)
     canvas = pinhole_canvas(lens)

@@ -9,7 +9,6 @@ takes the size from `default_size`. Lens distortion is dropped (the cameras are 
 """
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -20,21 +19,13 @@ from scene.cameras import Camera
 from scene.frames import GL_TO_CV
 from scene.pose_check import ORTHONORMAL_TOL, checked_c2w  # noqa: F401  (the one pose rule)
 from utils.errors import UserError
+from utils.io import read_json
 
 def camera_from_c2w(uid: int, name: str, c2w_cv: torch.Tensor, fx: float, fy: float, cx: float, cy: float,
                     width: int, height: int) -> Camera:
     """An image-less `Camera` from a camera-to-world matrix in OpenCV axes [4, 4]."""
     return Camera(uid, name, torch.linalg.inv(c2w_cv).float(), float(fx), float(fy), float(cx), float(cy),
                   int(width), int(height))
-
-
-def _load_json(path: Path):
-    try:
-        return json.loads(path.read_text())
-    except OSError as exc:
-        raise UserError(f"cannot read {path} ({exc.strerror}); check the path") from None
-    except ValueError as exc:
-        raise UserError(f"{path} is not valid JSON ({exc}); fix or regenerate it") from None
 
 
 def _number(value, key: str, where: str) -> float:
@@ -156,10 +147,8 @@ def read_pose_file(path: str | Path, default_size: tuple[int, int] | None = None
         if sparse is None:
             raise UserError(f"{path} is a folder without a COLMAP model (cameras.bin|txt, here or under sparse/0)")
         cameras = read_colmap_model(sparse)
-    elif not path.is_file():
-        raise UserError(f"pose file {path} does not exist; check the path")
     else:
-        data = _load_json(path)
+        data = read_json(path, kind=None, what="pose file", fix="fix or regenerate it")
         if isinstance(data, list):
             cameras = read_cameras_json(path, data)
         elif isinstance(data, dict) and isinstance(data.get("frames"), list):

@@ -7,7 +7,6 @@ The effective value is what the run records in `cfg_args`, so render.py and metr
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,6 +15,7 @@ from PIL import Image
 from scene.frames import IMAGE_SUFFIXES, target_size
 from scene.transforms_json import image_path
 from utils.errors import UserError
+from utils.io import read_json
 
 CUDA_MAX_WIDTH = 1600  # the 3DGS rule: wider images are scaled to this width
 MIN_IMAGE_SIDE = 16  # px; below this a few tiles cover the whole image and nothing useful is trained
@@ -43,7 +43,8 @@ def probe_image_size(source_path: str, images: str = "images") -> tuple[int, int
     try:
         for name in ("transforms_train.json", "transforms.json"):
             if (source / name).is_file():
-                return _first_frame_size(source, json.loads((source / name).read_text()))
+                data = read_json(source / name, damaged="none")  # damaged: the dataset reader says so
+                return None if data is None else _first_frame_size(source, data)
         path = min(p for p in (source / images).iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
         with Image.open(path) as im:
             return im.size

@@ -10,7 +10,6 @@ The one way render.py, recommend.py (`recommender`), the benchmarks and anything
 """
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +23,7 @@ from scene.gaussian_model import GaussianModel
 from scene.pose_files import read_pose_file
 from scene.scene import Scene
 from utils.errors import UserError
+from utils.io import read_json
 from utils.model_dir import CAMERAS, CFG_ARGS, POINT_CLOUD_DIR, SELECTION, point_cloud_ply
 
 
@@ -56,15 +56,9 @@ def background_color(model_cfg: ModelConfig, device: str | torch.device | None =
 
 def read_model_record(model_path: Path) -> dict:
     """`cfg_args` as train.py saved it (groups "model", "pipeline", "active", "dataset", ...)."""
-    cfg_file = model_path / CFG_ARGS
-    if not cfg_file.is_file():
+    saved = read_json(model_path / CFG_ARGS, missing="none", fix="retrain the model or restore the file")
+    if saved is None:
         raise UserError(f"{model_path} has no cfg_args: it is not a model directory written by train.py")
-    try:
-        saved = json.loads(cfg_file.read_text())
-    except ValueError:
-        saved = None
-    if not isinstance(saved, dict):
-        raise UserError(f"{cfg_file} is malformed; retrain the model or restore the file")
     return saved
 
 
@@ -148,16 +142,15 @@ def recorded_train_views(model_path: Path, iteration: int, num_train: int, metho
             raise UserError(f"{model_path}: the scene has no training cameras, so no training views to take the "
                             "uncertainty from")
         return list(range(num_train))
-    path = model_path / SELECTION
+    selection = read_json(model_path / SELECTION, missing="none", damaged="none") or {}  # either: the error below
     try:
-        selection = json.loads(path.read_text())
         stages, final = selection["stages"], selection.get("final")
         for stage in stages:  # the training set before acquisition s trained up to stage s's iteration
             if iteration <= stage["iteration"]:
                 return list(stage["train_views"])
         if final is not None:
             return list(final["train_views"])
-    except (OSError, ValueError, KeyError, TypeError):
+    except (KeyError, TypeError):
         pass
     raise UserError(f"{model_path}: no training views recorded for iteration {iteration} (selection.json missing, "
                     "unfinished or malformed); --uncertainty needs a finished train.py run")

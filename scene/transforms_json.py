@@ -8,7 +8,6 @@ p1 p2`, and `ply_file_path` (initial points; `sparse_pc.ply` beside the file is 
 """
 from __future__ import annotations
 
-import json
 import logging
 import math
 from pathlib import Path
@@ -21,6 +20,7 @@ from scene.lens import LENS_MODELS, Lens
 from scene.pose_check import checked_c2w
 from scene.ply_io import load_points_ply
 from utils.errors import UserError
+from utils.io import read_json
 
 log = logging.getLogger(__name__)
 
@@ -29,11 +29,8 @@ DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
 
 def read_transforms_file(path: Path) -> dict:
     """The parsed file, checked to hold a non-empty 'frames' list."""
-    try:
-        data = json.loads(path.read_text())
-    except ValueError as exc:
-        raise UserError(f"{path} is not valid JSON ({exc}); fix or regenerate it") from None
-    if not isinstance(data, dict) or not isinstance(data.get("frames"), list):
+    data = read_json(path, fix="fix or regenerate it")
+    if not isinstance(data.get("frames"), list):
         raise UserError(f"{path}: missing key 'frames' (a list of frames with file_path and transform_matrix)")
     if not data["frames"]:
         raise UserError(f"{path}: 'frames' is empty; the split needs at least one frame")

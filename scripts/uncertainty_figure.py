@@ -9,7 +9,6 @@ has run.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import matplotlib
@@ -19,6 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from utils.errors import UserError, run_cli  # noqa: E402
+from utils.io import read_json  # noqa: E402
 from utils.metrics_core import UNCERTAINTY_KINDS, method_dirs, read_rgb, uncertainty_key  # noqa: E402
 from utils.model_dir import PER_VIEW, method_name  # noqa: E402
 
@@ -55,9 +55,8 @@ def make_figure(model: Path, view: int, out: Path, iteration: int | None = None,
     for ax, title in zip(axes, titles):
         ax.set_title(title, fontsize=9)
         ax.axis("off")
-    per_view = model / PER_VIEW
-    if per_view.is_file():
-        scores = json.loads(per_view.read_text()).get(method_dir.name, {})
+    scores = (read_json(model / PER_VIEW, missing="none") or {}).get(method_dir.name)
+    if scores is not None:
         rho, area = (scores.get(uncertainty_key(m, kind, "image"), {}).get(name + ".png")
                      for m in ("Spearman", "AUSE_RMSE"))
         if rho is not None and area is not None:

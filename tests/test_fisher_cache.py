@@ -8,9 +8,10 @@ import pytest
 import torch
 
 from active import build_selector
-from active.acquisition import FisherSettings, run_selection
+from active.acquisition import run_selection
 from active.base import SelectionContext
 from active.fisher import FisherOracle, FisherViewBlocks
+from arguments import FisherSettings
 from scene.cameras import Camera
 from tests.scenes import intrinsics_for, look_at_viewmat
 from tests.test_view_factors import BG, SETTINGS, H, W, model
@@ -20,8 +21,8 @@ pytestmark = pytest.mark.usefixtures("single_torch_thread")  # tiny batched line
 
 def fake_blocks(eviction="priority", views=8, room=3):
     """A FisherViewBlocks whose views are 80-byte diagonals, with room for `room` of them; records computes."""
-    blocks = FisherViewBlocks(None, [None] * views, BG, SETTINGS, 1.0, (), False, room * 80, diagonal=True,
-                              eviction=eviction)
+    blocks = FisherViewBlocks(None, [None] * views, BG, SETTINGS, FisherSettings(), diagonal=True, eviction=eviction)
+    blocks.cache_bytes = room * 80
     blocks.computed = []
     blocks.compute = lambda v, *dtype: (blocks.computed.append(v), torch.full((10,), float(v), dtype=torch.float64))[1]
     return blocks
@@ -77,7 +78,7 @@ def scene():
     gaussians, cams = model(n=200), spiral_cameras()
     train = [0, 17]
     candidates = [v for v in range(len(cams)) if v not in train]
-    probe = FisherOracle.build(gaussians, cams, train, BG, SETTINGS, cache_mb=1 << 14)
+    probe = FisherOracle.build(gaussians, cams, train, BG, SETTINGS, fisher=FisherSettings(fisher_cache_mb=1 << 14))
     return gaussians, cams, train, candidates, sum(probe.blocks(v).nbytes for v in candidates)
 
 
@@ -132,7 +133,8 @@ def test_lazy_pop_makes_pop_gs_picks_on_a_real_model_with_fewer_oracles(scene, k
     gaussians, cams, train, candidates, _ = scene
     out = {}
     for method in ("pop_gs", "lazy_pop"):
-        oracle = FisherOracle.build(gaussians, cams, train, BG, SETTINGS, cache_mb=1 << 14)
+        oracle = FisherOracle.build(gaussians, cams, train, BG, SETTINGS,
+                                    fisher=FisherSettings(fisher_cache_mb=1 << 14))
         sel = build_selector(method).select(SelectionContext(candidates, oracle, torch.Generator().manual_seed(0), 0),
                                             k)
         out[method] = sel, oracle.evaluated

@@ -8,6 +8,7 @@ from active import build_selector
 from active.base import SelectionContext
 from active.fisher import FisherOracle, fisher_view_blocks
 from active.logdet import BlockInformation
+from arguments import FisherSettings
 from gaussian_renderer import RasterSettings, camera_center, project_gaussians
 from gaussian_renderer.reference import rasterize_reference
 from gaussian_renderer.sh import sh_to_colors
@@ -84,7 +85,8 @@ def test_view_blocks_equal_bruteforce_jacobian(backend):
 
 
 def select(model, mode, backend, method="pop_gs", k=2, **options):
-    oracle = FisherOracle.build(model, cameras(), [0, 3], BG, settings(backend), mode=mode)
+    oracle = FisherOracle.build(model, cameras(), [0, 3], BG, settings(backend),
+                                fisher=FisherSettings(fisher_mode=mode))
     ctx = SelectionContext([1, 2, 4, 5], oracle, torch.Generator().manual_seed(0), 0)
     return build_selector(method, **options).select(ctx, k), oracle
 
@@ -118,14 +120,16 @@ def test_cached_and_streaming_equal_greedy_on_bruteforce_blocks(backend):
 
 def test_prior_views_are_float64_and_candidates_are_stored_float32(backend):
     # The stage prior sums the training views' factors as computed (float64); the cache keeps FACTOR_STORAGE.
-    oracle = FisherOracle.build(tiny_model(seed=2), cameras(), [0, 3], BG, settings(backend), mode="cached")
+    oracle = FisherOracle.build(tiny_model(seed=2), cameras(), [0, 3], BG, settings(backend),
+                                fisher=FisherSettings(fisher_mode="cached"))
     assert oracle.blocks.compute(0).packed.dtype == torch.float64
     assert oracle.blocks(1).packed.dtype == torch.float32
 
 
 def test_out_of_memory_while_caching_falls_back_to_streaming(monkeypatch, caplog, backend):
     model = tiny_model(seed=2)
-    oracle = FisherOracle.build(model, cameras(), [0, 3], BG, settings(backend), mode="cached")
+    oracle = FisherOracle.build(model, cameras(), [0, 3], BG, settings(backend),
+                                fisher=FisherSettings(fisher_mode="cached"))
     reference, _ = select(model, "cached", backend)
     compute = oracle.blocks.compute
     failed = []

@@ -7,6 +7,7 @@ from active import build_selector
 from active.base import SelectionContext
 from active.fisher import (REFERENCE_DIAGONAL_GROUPS, DiagonalGainOracle, build_oracle, fisher_view_blocks,
                            fisher_view_diagonals, fisher_view_diagonals_reference, parameter_columns)
+from arguments import FisherSettings
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from tests.test_fisher_oracle import BG, H, W, cameras, reference_image, settings, tiny_model
 from utils.errors import UserError
@@ -99,7 +100,8 @@ def test_selection_equals_greedy_on_bruteforce_diagonals(mode, params, lam, back
     cols = parameter_columns(model, RAW_PARAMETER_GROUPS)
     keep = torch.cat([torch.arange(cols[g].start, cols[g].stop) for g in params.split(",")])
     ids, scores = greedy_reference(diags, [0, 3], [1, 2, 4, 5], 3, keep, lam)
-    oracle = build_oracle("diagonal", model, cams, [0, 3], BG, settings(backend), mode=mode)
+    oracle = build_oracle("diagonal", model, cams, [0, 3], BG, settings(backend),
+                          fisher=FisherSettings(fisher_mode=mode))
     ctx = SelectionContext([5, 1, 4, 2], oracle, torch.Generator().manual_seed(0), 0)
     sel = build_selector("fisherrf", fisherrf_lambda=lam, fisherrf_params=params).select(ctx, 3)
     assert sel.ids == ids
@@ -119,7 +121,8 @@ def test_reference_variant_equals_greedy_on_bruteforce_reference_diagonals(mode,
     ids, scores = greedy_reference(diags, [0, 3], [1, 2, 4, 5], 3, keep, 1e-6)
     selector = build_selector("fisherrf", fisherrf_variant="reference")
     assert selector.oracle_kind == "diagonal_reference"
-    oracle = build_oracle(selector.oracle_kind, model, cams, [0, 3], BG, settings(backend), mode=mode)
+    oracle = build_oracle(selector.oracle_kind, model, cams, [0, 3], BG, settings(backend),
+                          fisher=FisherSettings(fisher_mode=mode))
     sel = selector.select(SelectionContext([5, 1, 4, 2], oracle, torch.Generator().manual_seed(0), 0), 3)
     assert sel.ids == ids
     torch.testing.assert_close(torch.tensor(sel.gains), torch.tensor(scores), rtol=1e-4, atol=0.0)

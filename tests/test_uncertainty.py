@@ -10,6 +10,7 @@ import torch
 from active.logdet import BlockInformation
 from active.uncertainty import (camera_depths, fisherrf_information, fisherrf_map, gaussian_uncertainty,
                                 parse_uncertainty_kinds, uncertainty_map, view_information)
+from arguments import FisherSettings
 from gaussian_renderer import render
 from scene.trained import recorded_train_views
 from tests.conftest import run_cli
@@ -44,13 +45,14 @@ def test_ause_on_known_arrays():
 @pytest.mark.parametrize("backend", ["torch", "compiled"])
 def test_gaussian_uncertainty_equals_a_dense_inverse_of_bruteforce_blocks(backend):
     model, cams = tiny_model(seed=3), cameras()
-    u = gaussian_uncertainty(model, cams, [0, 2, 4], BG, settings(backend), sigma=0.5)
+    u = gaussian_uncertainty(model, cams, [0, 2, 4], BG, settings(backend), fisher=FisherSettings(sigma=0.5))
     prior = sum(bruteforce_blocks(model, cams[v], sigma=0.5) for v in (0, 2, 4))  # [N, 14, 14]
     a = BlockInformation(prior).matrix  # the same ridge, added to the brute-force prior
     expected = torch.stack([torch.trace(torch.linalg.inv(block)[:3, :3]) for block in a])
     torch.testing.assert_close(u, expected, rtol=1e-3, atol=0.0)
     assert bool((u > 0).all())
-    more = gaussian_uncertainty(model, cams, [0, 1, 2, 3, 4, 5], BG, settings(backend), sigma=0.5)
+    more = gaussian_uncertainty(model, cams, [0, 1, 2, 3, 4, 5], BG, settings(backend),
+                                fisher=FisherSettings(sigma=0.5))
     assert bool((more <= u * (1 + 1e-6)).all())  # more views: no Gaussian more uncertain
 
 

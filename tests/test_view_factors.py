@@ -10,6 +10,7 @@ from active import build_selector
 from active.base import SelectionContext
 from active.fisher import FisherOracle, fisher_view_blocks, fisher_view_diagonals, fisher_view_factors
 from active.logdet import BlockInformation, DenseBlockInformation
+from arguments import FisherSettings
 from gaussian_renderer import RasterSettings
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from scene.cameras import Camera
@@ -126,12 +127,14 @@ def test_float32_storage_keeps_gains_to_1e6_and_the_picks():
 
 def test_cache_budget_too_small_for_one_view_streams_and_says_so(monkeypatch, caplog):
     gaussians, cams = model(), cameras()
-    reference = FisherOracle.build(gaussians, cams, [0, 4], BG, SETTINGS, mode="streaming")
+    reference = FisherOracle.build(gaussians, cams, [0, 4], BG, SETTINGS,
+                                   fisher=FisherSettings(fisher_mode="streaming"))
     expected = build_selector("pop_gs").select(SelectionContext([1, 2, 3, 5], reference,
                                                                 torch.Generator().manual_seed(0), 0), 2)
     monkeypatch.setattr("active.fisher._cache_budget", lambda cache_mb: 1000)  # bytes: below one view's factors
     with caplog.at_level(logging.WARNING):
-        oracle = FisherOracle.build(gaussians, cams, [0, 4], BG, SETTINGS, mode="cached")
+        oracle = FisherOracle.build(gaussians, cams, [0, 4], BG, SETTINGS,
+                                    fisher=FisherSettings(fisher_mode="cached"))
     assert "more than the cache budget of 0.0 MB" in caplog.text and "switching the Fisher oracle to streaming" \
         in caplog.text
     assert oracle.blocks.streaming
@@ -142,7 +145,7 @@ def test_cache_budget_too_small_for_one_view_streams_and_says_so(monkeypatch, ca
 
 def test_cached_factors_are_bounded_by_the_budget_in_bytes():
     gaussians, cams = model(), cameras()
-    oracle = FisherOracle.build(gaussians, cams, [0, 4], BG, SETTINGS, mode="cached")
+    oracle = FisherOracle.build(gaussians, cams, [0, 4], BG, SETTINGS, fisher=FisherSettings(fisher_mode="cached"))
     sizes = {v: oracle.blocks(v).nbytes for v in (1, 2, 3)}
     assert all(oracle.blocks(v).packed.dtype == torch.float32 for v in (1, 2, 3))
     assert oracle.blocks._cached_bytes == sum(sizes.values())

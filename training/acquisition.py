@@ -7,6 +7,7 @@ import torch
 
 from active import Selector, acquisition
 from active.schedule import farthest_point_views
+from arguments import FisherSettings
 from gaussian_renderer import RasterSettings
 from scene.scene import Scene
 from training.config import TrainConfig
@@ -35,7 +36,7 @@ def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: S
     candidates = [v for v in range(len(scene.train_cameras)) if v not in state.train_views]
     step = acquisition.run_selection(selector, state.gaussians, scene.train_cameras, state.train_views, candidates, k,
                                      background, settings, seed=cfg.run.seed, stage=state.stage,
-                                     fisher=acquisition.FisherSettings.from_active(cfg.active))
+                                     fisher=FisherSettings.from_active(cfg.active))
     selection = step.selection
     return {
         "stage": state.stage,

@@ -10,7 +10,6 @@
 from __future__ import annotations
 
 import contextlib
-import json
 import random
 import time
 from dataclasses import dataclass, field, replace
@@ -35,7 +34,7 @@ from training.step import next_view, test_psnr, training_step
 from training.time_estimate import RunTimeEstimator
 from utils import dir_lock
 from utils.checkpoint import RunDirectory
-from utils.io import write_json
+from utils.io import read_json, write_json
 from utils.model_dir import INPUT_PLY, SELECTION
 from utils.provenance import session_record
 from utils.seeding import seed_everything, set_rng_state
@@ -137,10 +136,7 @@ def _open_run(cfg: TrainConfig, model_path: str) -> Run:
 
 def previous_sessions(selection_path: Path) -> list[dict[str, Any]]:
     """The sessions an earlier start of this run recorded in selection.json ([] when there is none to read)."""
-    try:
-        sessions = json.loads(selection_path.read_text()).get("sessions", [])
-    except (OSError, ValueError, AttributeError):
-        return []
+    sessions = (read_json(selection_path, missing="none", damaged="none") or {}).get("sessions", [])
     return [s for s in sessions if isinstance(s, dict)] if isinstance(sessions, list) else []
 
 

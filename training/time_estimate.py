@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from active.schedule import StagePlan
+from arguments import FisherSettings
 
 WARMUP = 5  # iterations not timed (first-call allocations)
 MEASURE_UNTIL = 20  # iterations after the start (or resume) at which the estimate is made
@@ -160,9 +161,9 @@ class RunTimeEstimator:
         from scene.resolution_policy import probe_image_size
 
         cfg, state, cameras = run.cfg, run.state, run.scene.train_cameras
+        fisher = FisherSettings.from_active(cfg.active)
         uses_oracle = run.selector is not None and run.selector.uses_oracle
-        work = SelectionWork(run.selector.conservative_count if uses_oracle else None,
-                             cfg.active.fisher_mode == "streaming")
+        work = SelectionWork(run.selector.conservative_count if uses_oracle else None, fisher.streaming)
         size = (cameras[0].width, cameras[0].height)
         full_size = probe_image_size(cfg.model.source_path, cfg.model.images) or size
 
@@ -171,7 +172,7 @@ class RunTimeEstimator:
 
             def blocks() -> None:
                 fisher_view_blocks(state.gaussians, cameras[view], run.background, run.settings,
-                                   param_groups=FISHER_PARAM_GROUPS[cfg.active.fisher_params])
+                                   param_groups=FISHER_PARAM_GROUPS[fisher.fisher_params])
             blocks()  # untimed: the first call compiles the Gram kernel when numba's cache is cold (~10 s)
             t0 = time.perf_counter()
             blocks()

@@ -1,7 +1,6 @@
 """The model directory's run bookkeeping: status file, config, and atomic per-stage checkpoints."""
 from __future__ import annotations
 
-import json
 import os
 import re
 import shutil
@@ -12,7 +11,7 @@ from typing import Any
 import torch
 
 from utils.errors import UserError
-from utils.io import save_torch, write_json
+from utils.io import read_json, save_torch, write_json
 from utils.model_dir import CFG_ARGS, CHECKPOINTS_DIR, LOCK_FILE, RUN_STATUS, checkpoint_file
 
 CHECKPOINT_FORMAT_VERSION = 1
@@ -32,11 +31,8 @@ class RunDirectory:
         return self.path / RUN_STATUS
 
     def status(self) -> dict[str, Any] | None:
-        """The parsed status file, or None when there is none (or it is unreadable)."""
-        try:
-            return json.loads(self.status_file.read_text())
-        except (OSError, ValueError):
-            return None
+        """The parsed status file, or None when there is none (or it is damaged: the run starts over)."""
+        return read_json(self.status_file, missing="none", damaged="none")
 
     def is_complete(self) -> bool:
         status = self.status()

@@ -1,15 +1,20 @@
-"""Atomic file writes: a reader never sees a half-written JSON, checkpoint or PLY.
+"""Atomic file writes (a reader never sees a half-written JSON, checkpoint or PLY) and the one JSON reader.
 
 Every file that marks progress or holds results (run_status.json, cfg_args, selection.json, results.json,
 per_view.json, the PLYs, the checkpoints, reports) goes through `atomic_write`: it is written to a temporary name in
 the same directory, fsynced, and renamed over the target (`os.replace`), so the target is either the old file or
 the whole new one. A full disk or a permission error during the write is one `UserError` line naming the path, the
 bytes being written and the free space; the temporary file is removed and the old file is left as it was.
+
+The one JSON reader, `read_json`, takes an explicit policy for a missing and for a damaged file (unreadable, not valid
+JSON, or the wrong type at the top): a one-line `UserError` naming the file and the fix, or None for a caller that
+tolerates it (a grid summary skips a run it cannot read, with a warning).
 """
 from __future__ import annotations
 
 import errno
 import json
+import logging
 import os
 import shutil
 import tempfile
@@ -17,6 +22,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from utils.errors import UserError
+
+log = logging.getLogger(__name__)
 
 # errno values that are the user's disk or permissions, not a bug: reported as one line instead of a traceback
 DISK_ERRNOS = {errno.ENOSPC: "no space left on device", errno.EDQUOT: "disk quota exceeded",
@@ -137,6 +144,48 @@ def _fsync_dir(folder: Path) -> None:
 def write_json(path: str | os.PathLike, data: Any) -> None:
     """Write `data` as indented JSON, atomically."""
     atomic_write(path, json.dumps(data, indent=2) + "\n")
+
+
+MISSING_POLICIES = ("error", "none")  # read_json's `missing`
+DAMAGED_POLICIES = ("error", "warn", "none")  # read_json's `damaged`
+_JSON_TYPES = {dict: "an object", list: "an array", str: "a string", int: "a number", float: "a number",
+               bool: "a boolean", type(None): "null"}
+
+
+def read_json(path: str | os.PathLike, *, missing: str = "error", damaged: str = "error", kind: type | None = dict,
+              what: str = "", fix: str = "rerun the step that writes it") -> Any:
+    """The parsed JSON file `path` (`what` names it in messages, e.g. "pose file"), by an explicit policy.
+
+    Args:
+        missing: when the file does not exist: "error" raises a `UserError` naming it; "none" returns None.
+        damaged: when it cannot be read, is not valid JSON (e.g. truncated) or its top level is not `kind` (None: any):
+            "error" raises a one-line `UserError` naming the file, what is wrong and `fix`; "warn" logs that line
+            (the caller skips the file) and returns None; "none" returns None.
+    """
+    if missing not in MISSING_POLICIES or damaged not in DAMAGED_POLICIES:
+        raise ValueError(f"read_json: missing must be one of {MISSING_POLICIES} and damaged one of "
+                         f"{DAMAGED_POLICIES}, got {missing!r} and {damaged!r}")
+    label = f"{what} {path}" if what else str(path)
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        if missing == "none":
+            return None
+        raise UserError(f"{label} does not exist; check the path") from None
+    except OSError as exc:
+        problem = f"cannot read {label} ({exc.strerror or type(exc).__name__}); {fix}"
+    except ValueError as exc:  # invalid JSON, or bytes that are not UTF-8
+        problem = f"{label} is not valid JSON ({exc}); {fix}"
+    else:
+        if kind is None or isinstance(data, kind):
+            return data
+        problem = (f"{label} holds {_JSON_TYPES.get(type(data), type(data).__name__)} where {_JSON_TYPES[kind]} "
+                   f"belongs; {fix}")
+    if damaged == "error":
+        raise UserError(problem)
+    if damaged == "warn":
+        log.warning("skipping %s", problem)
+    return None
 
 
 def save_torch(path: str | os.PathLike, obj: Any) -> None:

@@ -291,6 +291,11 @@ class FisherViewBlocks:
         -inf: never again). Under "priority" eviction the lowest is evicted first."""
         self._priority[view_id] = float(bound)
 
+    @property
+    def cached_bytes(self) -> int:
+        """Bytes the cache holds now (0 in streaming mode)."""
+        return self._cached_bytes
+
     def compute(self, view_id: int, dtype: torch.dtype = torch.float64) -> ViewFactors | torch.Tensor:
         """The factors (in `dtype`, computed in float64) or diagonals [N, P] of `cameras[view_id]`, timed, never
         cached."""

@@ -22,7 +22,6 @@ import statistics
 import time
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from active import fisher
@@ -31,11 +30,11 @@ from active.logdet import BlockInformation, DenseBlockInformation, ViewFactors
 from active.schedule import farthest_point_views
 from gaussian_renderer import RasterSettings
 from scene.cameras import Camera
+from scene.garden import load_garden
 from scene.gaussian_model import GaussianModel
 from utils.errors import run_cli
 
 RESULTS_DIR = Path(__file__).parent / "results"
-GARDEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "gsplat_garden" / "test_garden.npz"
 POP_GS_HZ = {"block w/o SH": 1.71, "full block": 0.15, "diagonal": 12.16}  # per candidate, Blender ship, a GPU
 
 
@@ -87,23 +86,6 @@ def synthetic(n: int, visible: float, peak: float, repeats: int) -> dict:
           f"{row['commit_new_ms']:.1f} ms; floor {row['commit_floor_ms']:.2f} ms | |new - old| / old = "
           f"{row['gain_rel_diff']:.1e}, float32 storage {row['f32_rel_diff']:.1e}", flush=True)
     return row
-
-
-def garden(size: str, sh_degree: int = 3) -> tuple[GaussianModel, list[Camera], torch.Tensor, RasterSettings]:
-    """The garden SfM points initialised as 3DGS does, and its 3 cameras at `size` (a multiple of 648x420)."""
-    if not GARDEN.is_file():
-        raise SystemExit(f"error: {GARDEN} not found (../shared/data/gsplat_garden)")
-    data = np.load(GARDEN)
-    width, height = (int(v) for v in size.split("x"))
-    scale = width / int(data["width"])
-    gaussians = GaussianModel.from_point_cloud(torch.from_numpy(data["means3d"]).float(),
-                                               torch.from_numpy(data["colors"]).float() / 255.0, sh_degree)
-    gaussians.active_sh_degree = sh_degree
-    cams = []
-    for i, (view, k) in enumerate(zip(data["viewmats"], data["Ks"])):
-        cams.append(Camera(i, f"garden{i}", torch.from_numpy(view).float(), float(k[0, 0]) * scale,
-                           float(k[1, 1]) * scale, float(k[0, 2]) * scale, float(k[1, 2]) * scale, width, height))
-    return gaussians, cams, torch.zeros(3), RasterSettings()
 
 
 def per_candidate(name: str, gaussians: GaussianModel, cams: list[Camera], bg: torch.Tensor,
@@ -222,7 +204,7 @@ def main() -> None:
                                        candidates, len(candidates), peak, args.dense_limit_gb, args.repeats,
                                        args.params)
     for size in args.garden or []:
-        gaussians, cams, bg, settings = garden(size)
+        gaussians, cams, bg, settings = load_garden(size)
         out["scenes"] += per_candidate(f"garden {size}", gaussians, cams, bg, settings, [0], [1, 2, 1], 78, peak,
                                        args.dense_limit_gb, args.repeats, args.params)
     out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

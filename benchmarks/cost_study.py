@@ -174,7 +174,7 @@ def run_config(spec: dict) -> dict:
     model = load_source(spec["source"])
     pool = make_pool(model, candidate_cameras(f"{spec['candidates']}:{spec['M']}", model),
                      width=model.captured[0].width)
-    fisher = replace(model.fisher, mode="cached", cache_mb=UNLIMITED_MB)
+    fisher = replace(model.fisher, fisher_mode="cached", fisher_cache_mb=UNLIMITED_MB)
 
     def select(selector: Selector, train_ids: list[int], candidate_ids: list[int], k: int) -> None:
         run_selection(selector, model.gaussians, pool.cameras, train_ids, candidate_ids, k, model.background,

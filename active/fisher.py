@@ -392,7 +392,7 @@ class FisherOracle(_ViewStatistics, BlockGainOracle):
         `gain_weight="opacity"` each Gaussian's log-det term is weighted by its opacity
         (`active.base.GAIN_WEIGHTS`)."""
         source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, FISHER_PARAM_GROUPS[param_groups],
-                                  mode == "streaming", _cache_budget(cache_mb))
+                                  mode == "streaming", cache_budget(cache_mb))
         prior = _prior(source, train_views, len(cameras))
         weights = gaussians.opacities.detach() if gain_weight == "opacity" else None
         return cls(BlockInformation(prior, delta_rel=delta_rel, delta_abs=delta_abs), source, weights)
@@ -439,7 +439,7 @@ class DiagonalFisherOracle(_ViewStatistics, DiagonalGainOracle):
         FisherRF's code's diagonal over `REFERENCE_DIAGONAL_GROUPS`)."""
         groups = REFERENCE_DIAGONAL_GROUPS if reference else RAW_PARAMETER_GROUPS
         source = FisherViewBlocks(gaussians, cameras, background, settings, sigma, groups, mode == "streaming",
-                                  _cache_budget(cache_mb), diagonal=True, reference=reference)
+                                  cache_budget(cache_mb), diagonal=True, reference=reference)
         return cls(_prior(source, train_views, len(cameras)), source)
 
 
@@ -464,9 +464,11 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
     raise ValueError(f"unknown oracle kind {kind!r} (a selector's oracle_kind is one of {', '.join(ORACLE_KINDS)})")
 
 
-def _cache_budget(cache_mb: int) -> int:
-    """--fisher_cache_mb in bytes (0: a quarter of the available memory)."""
-    return cache_mb * (1 << 20) if cache_mb > 0 else available_memory_bytes() // 4
+def cache_budget(cache_mb: int, available: int | None = None) -> int:
+    """--fisher_cache_mb in bytes (0: a quarter of `available`, default the available memory)."""
+    if cache_mb > 0:
+        return cache_mb * (1 << 20)
+    return (available_memory_bytes() if available is None else available) // 4
 
 
 def summed_views(compute: Callable[[int], torch.Tensor], views: list[int]) -> torch.Tensor:

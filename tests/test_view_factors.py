@@ -129,7 +129,7 @@ def test_cache_budget_too_small_for_one_view_streams_and_says_so(monkeypatch, ca
     reference = FisherOracle.build(gaussians, cams, [0, 4], BG, SETTINGS, mode="streaming")
     expected = build_selector("pop_gs").select(SelectionContext([1, 2, 3, 5], reference,
                                                                 torch.Generator().manual_seed(0), 0), 2)
-    monkeypatch.setattr("active.fisher._cache_budget", lambda cache_mb: 1000)  # bytes: below one view's factors
+    monkeypatch.setattr("active.fisher.cache_budget", lambda cache_mb: 1000)  # bytes: below one view's factors
     with caplog.at_level(logging.WARNING):
         oracle = FisherOracle.build(gaussians, cams, [0, 4], BG, SETTINGS, mode="cached")
     assert "more than the cache budget of 0.0 MB" in caplog.text and "switching the Fisher oracle to streaming" \

@@ -1,20 +1,30 @@
 """The Fisher pass's memory, known before the work (`active.memory_budget`): the estimate's formula, its growth, its
-agreement with the measured peak and the check's three outcomes."""
+agreement with the measured peak, the check's three outcomes, and the CLIs refusing a model too large in seconds."""
 from __future__ import annotations
 
 import json
 import logging
 import os
+import time
 from dataclasses import replace
 
+import numpy as np
 import pytest
 import torch
+from plyfile import PlyData, PlyElement
 
+from active import build_selector
 from active.acquisition import FisherSettings
 from active.memory_budget import (FisherWork, device_available_bytes, estimate, fit_fisher_memory, selection_work,
                                   smaller_passes)
+from arguments import ActiveConfig, ModelConfig, PipelineConfig, config_to_dict
+from scene.cameras import Camera, look_at
 from scene.gaussian_model import GaussianModel
+from scene.ply_io import ply_attribute_names
 from tests.conftest import run_cli
+from tests.test_recommend import EYES, _cameras_json
+from training.acquisition import fit_selection_memory
+from training.config import parse_config
 from utils.errors import UserError
 
 GB = 10 ** 9
@@ -141,3 +151,83 @@ def test_cuda_memory_is_the_devices_free_memory(monkeypatch):
     monkeypatch.setattr(torch.cuda, "mem_get_info", lambda device: (123, 456))
     assert device_available_bytes(torch.device("cuda")) == 123
     assert device_available_bytes(torch.device("cpu")) > 0
+
+
+def test_an_acquisition_lowers_the_cache_or_refuses_with_train_flags(tiny_scene, monkeypatch):
+    n = 200_000
+    gaussians = GaussianModel(3, {"means": torch.zeros(n, 3), "sh_dc": torch.zeros(n, 1, 3),
+                                  "sh_rest": torch.zeros(n, 15, 3), "logit_opacities": torch.zeros(n),
+                                  "log_scales": torch.zeros(n, 3), "quats": torch.zeros(n, 4)})
+    cameras = [Camera(i, f"c{i}", look_at(torch.tensor([3.0, float(i), 1.0])), 50, 50, 32, 32, 64, 64)
+               for i in range(10)]
+    default = selection_work("logdet", gaussians, 64 * 64, 8, "default")  # P = 14: the cache outgrows the prior
+    monkeypatch.setattr("training.acquisition.device_available_bytes",
+                        lambda device: int(estimate(default).fixed / 0.8))
+    cfg = parse_config(["-s", str(tiny_scene), "--method", "pop_gs"])
+    fisher = fit_selection_memory(cfg, build_selector("pop_gs"), gaussians, cameras, 8)
+    assert 0 < fisher.cache_mb and fisher.mode == "cached"  # the default quarter, lowered
+    cfg = parse_config(["-s", str(tiny_scene), "--method", "pop_gs", "--fisher_params", "full_sh"])
+    with pytest.raises(UserError, match=rf"pop_gs Fisher pass over {n} Gaussians \(P = 59, --fisher_params "
+                                        r"full_sh\) needs about .* pass --fisher_params default \(about"):
+        fit_selection_memory(cfg, build_selector("pop_gs"), gaussians, cameras, 8)
+
+
+@pytest.fixture(scope="module")
+def big_ply(tmp_path_factory):
+    """A PLY of `BIG_N` full-SH Gaussians in the 3DGS layout, written with plyfile (744 MB)."""
+    path = tmp_path_factory.mktemp("big") / "big.ply"
+    data = np.zeros(BIG_N, dtype=[(name, "f4") for name in ply_attribute_names(45)])
+    g = np.random.default_rng(0)
+    for axis in "xyz":
+        data[axis] = g.uniform(-0.6, 0.6, BIG_N)
+    data["rot_0"], data["opacity"] = 1.0, -2.0
+    for i in range(3):
+        data[f"scale_{i}"] = -5.0
+    PlyData([PlyElement.describe(data, "vertex")]).write(str(path))
+    return path
+
+
+def _assert_refused_in_seconds(result, seconds: float, limit: float = 10.0) -> str:
+    """One `error:` line naming the estimate and the available memory, in under `limit` s, exit 2."""
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+    assert "needs about" in lines[0] and "GB is available" in lines[0], lines[0]
+    assert seconds <= limit, f"refused after {seconds:.1f} s"
+    return lines[0]
+
+
+def test_recommend_refuses_a_model_too_large_in_seconds(big_ply, tmp_path):
+    cams = _cameras_json(tmp_path / "cameras.json", EYES)
+    out = tmp_path / "out"
+    t0 = time.perf_counter()
+    r = run_cli("recommend.py", "-m", str(big_ply), "--captured", str(cams), "--candidates", "orbit:8", "-k", "2",
+                "--method", "pop_gs", "--fisher_params", "full_sh", "-o", str(out), "--quiet")
+    line = _assert_refused_in_seconds(r, time.perf_counter() - t0)
+    assert f"pop_gs Fisher pass over {BIG_N} Gaussians (P = 59, --fisher_params full_sh)" in line
+    assert not out.exists()
+
+
+def test_render_uncertainty_refuses_a_model_too_large_in_seconds(big_ply, tiny_scene, tmp_path):
+    model = tmp_path / "model"
+    (model / "point_cloud" / "iteration_1").mkdir(parents=True)
+    (model / "point_cloud" / "iteration_1" / "point_cloud.ply").symlink_to(big_ply)
+    (model / "cfg_args").write_text(json.dumps({
+        "model": config_to_dict(ModelConfig(source_path=str(tiny_scene), sh_degree=3)),
+        "pipeline": config_to_dict(PipelineConfig()), "active": config_to_dict(ActiveConfig(fisher_params="full_sh"))}))
+    t0 = time.perf_counter()
+    r = run_cli("render.py", "-m", str(model), "--uncertainty", "--quiet")
+    line = _assert_refused_in_seconds(r, time.perf_counter() - t0)
+    assert f"position_variance uncertainty over {BIG_N} Gaussians (P = 59" in line
+    assert "--uncertainty_kind fisherrf,fisherrf_view" in line
+    assert not (model / "train").exists()
+
+
+def test_train_refuses_before_training_when_max_gaussians_would_not_fit(tiny_scene, tmp_path):
+    model = tmp_path / "model"
+    t0 = time.perf_counter()
+    r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(model), "--method", "pop_gs", "--fisher_params",
+                "full_sh", "--max_gaussians", str(BIG_N), "--num_random_points", "500", "--quiet")
+    line = _assert_refused_in_seconds(r, time.perf_counter() - t0, limit=30.0)
+    assert f"over up to {BIG_N} Gaussians (P = 59, --fisher_params full_sh)" in line
+    assert "pass --max_gaussians" in line
+    assert not (model / "cfg_args").exists()

@@ -67,7 +67,7 @@ def test_estimate_grows_with_gaussians_block_pixels_and_candidates(kind):
 def test_estimate_is_within_the_headroom_of_the_measured_peak():
     """Measured peak resident memory (VmHWM) of real passes in a subprocess: logdet (P = 14, cache of two
     candidates), the full-SH uncertainty prior (P = 59) and the diagonal oracle; estimate / measured in
-    [0.85, 1.25] (measured 0.94-1.18 on 2026-12-04; the check keeps 15 % headroom, `HEADROOM`)."""
+    [0.85, 1.25] (0.90-1.18 measured on 2026-12-04, docs/performance.md; the check keeps 15 % headroom)."""
     r = run_cli("-m", "tests.memory_probe", "logdet:60000:default", "uncertainty:8000:full_sh",
                 "diagonal:40000:default", timeout=300)
     assert r.returncode == 0, r.stderr

@@ -32,7 +32,7 @@ tests/test_memory_budget.py compares the estimate with the peak resident memory 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import torch
@@ -78,7 +78,7 @@ class FisherWork:
     num_params: int  # P: the block's side ("logdet", "uncertainty") or the diagonal's width ("diagonal")
     pixels: int  # the largest image of the pass, W x H
     num_candidates: int = 0  # views the cache may hold
-    threads: int = 1  # the Gram kernel's slices (torch's thread count)
+    threads: int = field(default_factory=torch.get_num_threads)  # the Gram kernel's slices: torch's threads
     model_bytes: int = 0  # model growth still to come (0 when the model is loaded at its size)
 
     def __post_init__(self) -> None:
@@ -112,6 +112,7 @@ class FisherMemory:
 
 
 def gb(num_bytes: float) -> str:
+    """Bytes as 'X.Y GB' (10^9)."""
     return f"{num_bytes / 1e9:.1f} GB"
 
 
@@ -159,7 +160,7 @@ def selection_work(oracle_kind: str, gaussians: GaussianModel, pixels: int, num_
         return None
     groups = DIAGONAL_GROUPS[oracle_kind] if kind == "diagonal" else FISHER_PARAM_GROUPS[param_groups]
     return FisherWork(kind, gaussians.num_gaussians if num_gaussians is None else num_gaussians,
-                      block_size(gaussians, groups), pixels, num_candidates, torch.get_num_threads(), model_bytes)
+                      block_size(gaussians, groups), pixels, num_candidates, model_bytes=model_bytes)
 
 
 def largest_pixels(cameras: list[Camera]) -> int:

@@ -78,7 +78,7 @@ def measure(kind: str, n: int, params: str) -> dict:
     run_pass(kind, gaussians, params)
     measured = status_bytes("VmHWM") - before
     groups = RAW_PARAMETER_GROUPS if kind == "diagonal" else FISHER_PARAM_GROUPS[params]
-    work = FisherWork(kind, n, block_size(gaussians, groups), WIDTH * HEIGHT, VIEWS - 2, torch.get_num_threads())
+    work = FisherWork(kind, n, block_size(gaussians, groups), WIDTH * HEIGHT, VIEWS - 2)
     return {"kind": kind, "n": n, "params": params, "measured": measured,
             "estimate": estimate(work, CACHE_MB << 20).peak}
 

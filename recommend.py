@@ -20,10 +20,11 @@ from pathlib import Path
 import torch
 
 from active import build_selector_from, list_selectors
+from active.fisher import FISHER_PARAM_GROUPS
 from active.registry import selector_options_dataclass
 from arguments import add_config_args, config_from_args, config_to_dict
 from recommender.outputs import check_output_dir, summary_lines, write_outputs
-from recommender.pipeline import candidate_cameras, load_model, make_pool, recommend
+from recommender.pipeline import candidate_cameras, fit_memory, load_model, make_pool, recommend
 from utils.dir_lock import WAYS_OUT, writer_lock
 from utils.errors import UserError, run_cli
 from utils.model_dir import folder_lock_file
@@ -52,6 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--elevation", help="generated poses: elevation range LO,HI in degrees")
     p.add_argument("--radius", type=float, help="generated poses: distance to the look-at point")
     p.add_argument("--white_background", action="store_true", help="bare PLY: composite on white")
+    p.add_argument("--fisher_params", choices=tuple(FISHER_PARAM_GROUPS),
+                   help="override the model's Fisher parameter groups (a bare PLY: default)")
     p.add_argument("--fisher_mode", choices=("cached", "streaming"), help="override the model's Fisher mode")
     p.add_argument("--fisher_cache_mb", type=int, help="Fisher cache bound in MB (0 = a quarter of free RAM)")
     p.add_argument("--no_previews", action="store_true", help="skip the preview and uncertainty images")
@@ -92,12 +95,13 @@ def _recommend(args: argparse.Namespace, selector, model_path: Path, out: Path, 
     """Load the model, rank the candidates, write the output folder `out` and print the summary."""
     model = load_model(model_path, args.captured, iteration=args.iteration, device=args.device,
                        white_background=args.white_background)
-    overrides = {name: getattr(args, name) for name in ("fisher_mode", "fisher_cache_mb")}  # the same names
+    overrides = {name: getattr(args, name) for name in ("fisher_params", "fisher_mode", "fisher_cache_mb")}
     model.fisher = replace(model.fisher, **{name: value for name, value in overrides.items() if value is not None})
     size = _pair(args.size, "--size", int, "x")
     candidates = candidate_cameras(args.candidates, model, elevation=_pair(args.elevation, "--elevation", float, ","),
                                    radius=args.radius, size=size, fov_deg=args.fov)
     pool = make_pool(model, candidates, args.width)
+    model.fisher = fit_memory(model, pool, selector, previews=not args.no_previews)  # before any Fisher work
     load_seconds = time.perf_counter() - t0
     rec = recommend(model, pool, selector, args.k, seed=args.seed, progress=not args.quiet)
     record = write_outputs(rec, model, out, candidates_spec=args.candidates, device=args.device,

@@ -26,8 +26,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from active.uncertainty import (UNCERTAINTY_KINDS, fisherrf_information, fisherrf_map, gaussian_uncertainty,
-                                parse_uncertainty_kinds, uncertainty_map, view_information)
+from active.fisher import FISHER_PARAM_GROUPS, REFERENCE_DIAGONAL_GROUPS
+from active.memory_budget import (FisherWork, block_size, device_available_bytes, estimate, fit_fisher_memory,
+                                  largest_pixels, pass_label)
+from active.uncertainty import (COLOUR_GROUPS, UNCERTAINTY_KINDS, fisherrf_information, fisherrf_map,
+                                gaussian_uncertainty, parse_uncertainty_kinds, uncertainty_map, view_information)
 from arguments import ActiveConfig, FisherSettings, config_from_dict
 from gaussian_renderer import RasterSettings, render
 from scene.cameras import Camera
@@ -109,12 +112,17 @@ def object_pixels(image: torch.Tensor, gt: torch.Tensor, background: torch.Tenso
     return (((image * 255).round() != bg) | ((gt.to(image) * 255).round() != bg)).any(0)
 
 
+def recorded_active(trained: TrainedModel) -> ActiveConfig:
+    """The run's active-selection config from its cfg_args (the defaults for a run that recorded none)."""
+    saved = trained.record.get("active", {})
+    return config_from_dict(ActiveConfig, saved) if saved else ActiveConfig()
+
+
 def model_uncertainty(trained: TrainedModel, kinds: tuple[str, ...]) -> dict[str, torch.Tensor | None]:
     """Per kind, the per-Gaussian values from the model's recorded training views: u_i (the run's sigma, ridge and
     Fisher parameter groups, from cfg_args) for "position_variance", FisherRF's colour information for "fisherrf",
     None for "fisherrf_view" (it needs each rendered view). {kind: [N] or None}"""
-    saved = trained.record.get("active", {})
-    active = config_from_dict(ActiveConfig, saved) if saved else ActiveConfig()
+    active = recorded_active(trained)
     views = recorded_train_views(trained.path, trained.iteration, len(trained.scene.train_cameras), active.method)
     cameras, out = trained.scene.train_cameras, {}
     for kind in kinds:
@@ -126,6 +134,26 @@ def model_uncertainty(trained: TrainedModel, kinds: tuple[str, ...]) -> dict[str
         else:
             out[kind] = None
     return out
+
+
+def check_uncertainty_memory(trained: TrainedModel, kinds: tuple[str, ...]) -> None:
+    """Each kind's Fisher pass checked against the available memory before any work (one `UserError` line naming
+    the estimate, the available memory and the kinds that fit): the dense blocks of "position_variance" (the run's
+    --fisher_params), the diagonals of FisherRF's kinds."""
+    params = recorded_active(trained).fisher_params
+    gaussians, pixels = trained.gaussians, largest_pixels(trained.scene.train_cameras + trained.scene.test_cameras)
+    n = gaussians.num_gaussians
+    works = {"position_variance": FisherWork("uncertainty", n, block_size(gaussians, FISHER_PARAM_GROUPS[params]),
+                                             pixels),
+             "fisherrf": FisherWork("diagonal", n, block_size(gaussians, COLOUR_GROUPS), pixels),
+             "fisherrf_view": FisherWork("diagonal", n, block_size(gaussians, REFERENCE_DIAGONAL_GROUPS), pixels)}
+    available = device_available_bytes(gaussians.device)
+    for kind in kinds:
+        others = [k for k in works if k != kind]
+        remedy = {f"--uncertainty_kind {','.join(others)}": max((works[k] for k in others),
+                                                                 key=lambda w: estimate(w).peak)}
+        fit_fisher_memory(works[kind], FisherSettings(), pass_label(f"{kind} uncertainty", works[kind], params), remedy,
+                          "render without --uncertainty or on a larger machine", available)
 
 
 def render_model(model_path: str | Path, iteration: int = -1, skip_train: bool = False, skip_test: bool = False,
@@ -144,6 +172,8 @@ def _render_model(model_path: str | Path, iteration: int, skip_train: bool, skip
     trained = load_trained(model_path, iteration, source_path)
     if raster_backend:
         trained = replace(trained, settings=replace(trained.settings, backend=raster_backend))
+    if uncertainty:
+        check_uncertainty_memory(trained, uncertainty_kinds)
     u = model_uncertainty(trained, uncertainty_kinds) if uncertainty else None
     with_mask = trained.scene.info.kind == "blender"  # Blender frames are RGBA: an object region exists
     for split, cameras, skip in (("train", trained.scene.train_cameras, skip_train),

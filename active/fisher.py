@@ -269,7 +269,7 @@ class FisherViewBlocks:
     eviction: str = "priority"  # "priority" (the selector's hints, LRU without them) or "lru"
     param_groups: tuple[str, ...] = field(init=False)  # the columns of P
     streaming: bool = field(init=False)  # from `fisher`; switched on by `use_streaming`
-    cache_bytes: int = field(init=False)  # the cache budget (`_cache_budget` of --fisher_cache_mb)
+    cache_bytes: int = field(init=False)  # the cache budget (`cache_budget` of --fisher_cache_mb)
     views_computed: int = 0  # distinct views whose blocks were computed (candidates; prior views not counted)
     fisher_passes: int = 0  # candidate views' blocks computed, recomputations included (cache misses)
     fisher_seconds: float = 0.0  # time spent computing blocks, prior included
@@ -284,7 +284,7 @@ class FisherViewBlocks:
         diagonal_groups = REFERENCE_DIAGONAL_GROUPS if self.reference else RAW_PARAMETER_GROUPS
         self.param_groups = diagonal_groups if self.diagonal else FISHER_PARAM_GROUPS[self.fisher.fisher_params]
         self.streaming = self.fisher.streaming
-        self.cache_bytes = _cache_budget(self.fisher.fisher_cache_mb)
+        self.cache_bytes = cache_budget(self.fisher.fisher_cache_mb)
 
     def set_priority(self, view_id: int, bound: float) -> None:
         """A selector's hint: how likely `view_id` is to be asked for again (a lazy greedy's upper bound on its gain;
@@ -474,9 +474,11 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
     raise ValueError(f"unknown oracle kind {kind!r} (a selector's oracle_kind is one of {', '.join(ORACLE_KINDS)})")
 
 
-def _cache_budget(cache_mb: int) -> int:
-    """--fisher_cache_mb in bytes (0: a quarter of the available memory)."""
-    return cache_mb * (1 << 20) if cache_mb > 0 else available_memory_bytes() // 4
+def cache_budget(cache_mb: int, available: int | None = None) -> int:
+    """--fisher_cache_mb in bytes (0: a quarter of `available`, default the available memory)."""
+    if cache_mb > 0:
+        return cache_mb * (1 << 20)
+    return (available_memory_bytes() if available is None else available) // 4
 
 
 def summed_views(compute: Callable[[int], torch.Tensor], views: list[int]) -> torch.Tensor:

@@ -23,6 +23,9 @@ import torch
 
 from active.acquisition import Acquisition, run_selection
 from active.base import Selector
+from active.fisher import FISHER_PARAM_GROUPS
+from active.memory_budget import (NO_FISHER_PASS, FisherWork, block_size, device_available_bytes, fit_fisher_memory,
+                                  largest_pixels, pass_label, selection_work, smaller_passes)
 from arguments import FisherSettings, ModelConfig, PipelineConfig
 from gaussian_renderer import RasterSettings, project_gaussians
 from recommender.advice import selection_advice
@@ -140,6 +143,26 @@ def make_pool(model: LoadedModel, candidates: list[Camera] | None, width: int | 
     cap = width or (ModelConfig().cpu_max_width if device.type == "cpu" else CUDA_MAX_WIDTH)
     cameras = [scaled_camera(c, width if width else min(c.width, cap)).to(device) for c in cameras]
     return Pool(cameras, train_ids, candidate_ids, {v: cameras[v].image_name for v in candidate_ids}, index)
+
+
+def fit_memory(model: LoadedModel, pool: Pool, selector: Selector, previews: bool) -> FisherSettings:
+    """`model.fisher` for the selection over `pool`, its Fisher pass and (with `previews`) the previews' uncertainty
+    pass checked against the available memory before either starts (`active.memory_budget.fit_fisher_memory`: the
+    cache lowered, or one `UserError` line naming the estimate and recommend.py's flags that help)."""
+    fisher, gaussians, pixels = model.fisher, model.gaussians, largest_pixels(pool.cameras)
+    width, available = max(c.width for c in pool.cameras), device_available_bytes(gaussians.device)
+    work = selection_work(selector.oracle_kind, gaussians, pixels, len(pool.candidate_ids), fisher.fisher_params)
+    if work is not None and selector.uses_oracle:
+        remedies = smaller_passes(work, gaussians, width, "--width")
+        fisher = fit_fisher_memory(work, fisher, pass_label(f"{selector.name} Fisher pass", work, fisher.fisher_params),
+                                   remedies, NO_FISHER_PASS, available)
+    if previews:
+        work = FisherWork("uncertainty", gaussians.num_gaussians,
+                          block_size(gaussians, FISHER_PARAM_GROUPS[fisher.fisher_params]), pixels)
+        remedies = {"--no_previews": None} | smaller_passes(work, gaussians, width, "--width")
+        fit_fisher_memory(work, fisher, pass_label("previews' uncertainty", work, fisher.fisher_params), remedies,
+                          "pass --no_previews", available)
+    return fisher
 
 
 @torch.no_grad()

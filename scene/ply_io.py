@@ -48,7 +48,7 @@ def load_ply(path: str | os.PathLike) -> tuple[dict[str, torch.Tensor], int]:
     `UserError` naming the file and, for a foreign file, the first missing property.
     Returns:
         {means [N,3], sh_dc [N,1,3], sh_rest [N,K-1,3], logit_opacities [N], log_scales [N,3], quats [N,4]}
-        as float32 CPU tensors, and the SH degree.
+        as float32 CPU tensors (views of one table), and the SH degree.
     """
     if not os.path.isfile(path):
         raise UserError(f"PLY file {path} does not exist; check the path (point clouds are under "
@@ -69,25 +69,25 @@ def load_ply(path: str | os.PathLike) -> tuple[dict[str, torch.Tensor], int]:
         if degree is None:
             raise UserError(f"{path} has {num_rest} f_rest properties, which matches no SH degree 0..3 "
                             "(0, 9, 24 or 45 expected); point to a PLY written by train.py")
-        columns = {k: np.asarray(vertex[k], dtype=np.float32) for k in ply_attribute_names(num_rest)
-                   if k not in ("nx", "ny", "nz")}
+        # one float32 table in parameter order, f_rest reordered from channel-major on disk ([N, 3, K-1] flattened)
+        # to [N, K-1, 3]: one copy of the file's columns (a 3M-Gaussian degree-3 PLY: 2 s on a shared 2-core machine)
+        rest = [f"f_rest_{c * (num_rest // 3) + j}" for j in range(num_rest // 3) for c in range(3)]
+        order = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", *rest, "opacity", *(f"scale_{i}" for i in range(3)),
+                 *(f"rot_{i}" for i in range(4))]
+        table = torch.from_numpy(np.stack([np.asarray(vertex[k], dtype=np.float32) for k in order], axis=1))
     except UserError:
         raise
     except Exception as exc:  # plyfile raises many types for a damaged header or body
         raise UserError(f"cannot read PLY {path} ({type(exc).__name__}: {exc}); the file is corrupt or truncated, "
                         "retrain or restore it") from None
-    n = len(columns["x"])
-    cols = lambda keys: torch.from_numpy(np.stack([columns[k] for k in keys], axis=1))  # [N, len(keys)]
-    # f_rest is channel-major on disk: [N, 3, K-1] flattened.
-    rest = (cols([f"f_rest_{i}" for i in range(num_rest)]).reshape(n, 3, -1).transpose(1, 2) if num_rest
-            else torch.zeros(n, 0, 3))
-    params = {
-        "means": cols(["x", "y", "z"]),
-        "sh_dc": cols(["f_dc_0", "f_dc_1", "f_dc_2"])[:, None, :],
-        "sh_rest": rest.contiguous(),
-        "logit_opacities": cols(["opacity"])[:, 0],
-        "log_scales": cols([f"scale_{i}" for i in range(3)]),
-        "quats": cols([f"rot_{i}" for i in range(4)]),
+    n, r = table.shape[0], 6 + num_rest
+    params = {  # column views of the table (`GaussianModel.set_params` copies them)
+        "means": table[:, 0:3],
+        "sh_dc": table[:, 3:6].reshape(n, 1, 3),
+        "sh_rest": table[:, 6:r].reshape(n, num_rest // 3, 3),
+        "logit_opacities": table[:, r],
+        "log_scales": table[:, r + 1:r + 4],
+        "quats": table[:, r + 4:r + 8],
     }
     return params, degree
 

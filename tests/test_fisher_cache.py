@@ -94,7 +94,7 @@ def acquire(scene, method, k, eviction, budget, monkeypatch, options=None):
         return built[-1]
 
     monkeypatch.setattr("active.acquisition.build_oracle", build)
-    monkeypatch.setattr("active.fisher._cache_budget", lambda cache_mb: budget)
+    monkeypatch.setattr("active.fisher.cache_budget", lambda cache_mb: budget)
     step = run_selection(build_selector(method, **(options or {})), gaussians, cams, train, candidates, k, BG, SETTINGS,
                         fisher=FisherSettings())
     assert step.evaluated == built[0].evaluated

@@ -34,6 +34,6 @@ def test_active_config_states_no_fisher_default_or_name_of_its_own():
     (FisherSettings(), FISHER_PARAM_GROUPS["default"], False),
     (FisherSettings(fisher_params="full_sh", fisher_mode="streaming"), FISHER_PARAM_GROUPS["full_sh"], True)])
 def test_the_view_blocks_take_the_settings_whole(monkeypatch, fisher, groups, streaming):
-    monkeypatch.setattr("active.fisher._cache_budget", lambda cache_mb: cache_mb + 1)
+    monkeypatch.setattr("active.fisher.cache_budget", lambda cache_mb: cache_mb + 1)
     blocks = FisherViewBlocks(None, [], None, None, replace(fisher, fisher_cache_mb=5))
     assert (blocks.param_groups, blocks.streaming, blocks.cache_bytes) == (groups, streaming, 6)

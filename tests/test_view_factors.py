@@ -131,7 +131,7 @@ def test_cache_budget_too_small_for_one_view_streams_and_says_so(monkeypatch, ca
                                    fisher=FisherSettings(fisher_mode="streaming"))
     expected = build_selector("pop_gs").select(SelectionContext([1, 2, 3, 5], reference,
                                                                 torch.Generator().manual_seed(0), 0), 2)
-    monkeypatch.setattr("active.fisher._cache_budget", lambda cache_mb: 1000)  # bytes: below one view's factors
+    monkeypatch.setattr("active.fisher.cache_budget", lambda cache_mb: 1000)  # bytes: below one view's factors
     with caplog.at_level(logging.WARNING):
         oracle = FisherOracle.build(gaussians, cams, [0, 4], BG, SETTINGS,
                                     fisher=FisherSettings(fisher_mode="cached"))

@@ -1,14 +1,22 @@
-"""The views a run starts from and one acquisition step's selection (the stage record of selection.json)."""
+"""The views a run starts from, one acquisition step's selection (the stage record of selection.json) and the memory
+check of its Fisher pass."""
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import torch
 
 from active import Selector, acquisition
+from active.memory_budget import (NO_FISHER_PASS, FisherWork, block_size, device_available_bytes, fit_fisher_memory,
+                                  largest_count, largest_pixels, pass_label, selection_work, smaller_passes,
+                                  usable_bytes)
 from active.schedule import farthest_point_views
 from arguments import FisherSettings
 from gaussian_renderer import RasterSettings
+from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
+from scene.cameras import Camera
+from scene.gaussian_model import GaussianModel
 from scene.scene import Scene
 from training.config import TrainConfig
 from training.state import TrainState
@@ -32,11 +40,12 @@ def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
 def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: Selector, k: int,
                   background: torch.Tensor, settings: RasterSettings) -> dict[str, Any]:
     """The training run's acquisition step: `active.acquisition.run_selection` over the training cameras not trained
-    on yet (seeded by --seed and the stage); returns the stage record for selection.json."""
+    on yet (seeded by --seed and the stage), its Fisher pass checked against the available memory first
+    (`fit_selection_memory`); returns the stage record for selection.json."""
     candidates = [v for v in range(len(scene.train_cameras)) if v not in state.train_views]
+    fisher = fit_selection_memory(cfg, selector, state.gaussians, scene.train_cameras, len(candidates))
     step = acquisition.run_selection(selector, state.gaussians, scene.train_cameras, state.train_views, candidates, k,
-                                     background, settings, seed=cfg.run.seed, stage=state.stage,
-                                     fisher=FisherSettings.from_active(cfg.active))
+                                     background, settings, seed=cfg.run.seed, stage=state.stage, fisher=fisher)
     selection = step.selection
     return {
         "stage": state.stage,
@@ -51,3 +60,48 @@ def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: S
         "select_seconds": step.seconds,
         "test_psnr": test_psnr(state.gaussians, scene.test_cameras, background, settings),
     }
+
+
+TRAINING_BYTES_PER_FLOAT = 16  # a float32 parameter, its gradient and Adam's two moments
+DENSIFY_BYTES_PER_GAUSSIAN = 12  # the densification accumulators: gradient sum, visible count, largest radius
+
+
+def fit_selection_memory(cfg: TrainConfig, selector: Selector, gaussians: GaussianModel, cameras: list[Camera],
+                         num_candidates: int) -> acquisition.FisherSettings:
+    """The run's Fisher settings for an acquisition step over `num_candidates` of `cameras`, checked against the
+    available memory (`active.memory_budget.fit_fisher_memory`: the cache lowered, or one `UserError` line naming
+    the estimate and train.py's flags that help)."""
+    return _fit_memory(cfg, selector, gaussians, cameras, num_candidates,
+                       acquisition.FisherSettings.from_active(cfg.active), gaussians.num_gaussians)
+
+
+def check_memory_before_training(cfg: TrainConfig, selector: Selector, gaussians: GaussianModel,
+                                 cameras: list[Camera], num_candidates: int) -> None:
+    """`fit_selection_memory` at the largest model the run can grow to (its size or --max_gaussians), the growth
+    in training counted, without the cache (each acquisition fits the cache to the memory it finds then)."""
+    fisher = replace(acquisition.FisherSettings.from_active(cfg.active), fisher_mode="streaming")
+    _fit_memory(cfg, selector, gaussians, cameras, num_candidates, fisher,
+                max(gaussians.num_gaussians, cfg.densify.max_gaussians))
+
+
+def _fit_memory(cfg: TrainConfig, selector: Selector, gaussians: GaussianModel, cameras: list[Camera],
+                num_candidates: int, fisher: acquisition.FisherSettings, n_max: int) -> acquisition.FisherSettings:
+    """`fit_fisher_memory` of the selector's pass over `n_max` Gaussians (the growth from the model's size counted),
+    with train.py's remedies: --fisher_params default, -r (half the width), --max_gaussians."""
+    n_now = gaussians.num_gaussians
+    per_gaussian = TRAINING_BYTES_PER_FLOAT * block_size(gaussians, RAW_PARAMETER_GROUPS) + DENSIFY_BYTES_PER_GAUSSIAN
+
+    def work_at(n: int) -> FisherWork | None:
+        return selection_work(selector.oracle_kind, gaussians, largest_pixels(cameras), num_candidates,
+                              cfg.active.fisher_params, num_gaussians=n, model_bytes=max(n - n_now, 0) * per_gaussian)
+
+    work = work_at(n_max) if selector.uses_oracle else None
+    if work is None:
+        return fisher
+    available = device_available_bytes(gaussians.device)
+    remedies = smaller_passes(work, gaussians, max(c.width for c in cameras), "-r")
+    fitting = largest_count(work_at, n_max, usable_bytes(available))
+    if n_now <= fitting < n_max:
+        remedies[f"--max_gaussians {fitting}"] = work_at(fitting)
+    what = pass_label(f"{selector.name} Fisher pass", work, cfg.active.fisher_params, up_to=n_max > n_now)
+    return fit_fisher_memory(work, fisher, what, remedies, f"{NO_FISHER_PASS}, or fewer Gaussians", available)

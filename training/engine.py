@@ -26,7 +26,7 @@ from gaussian_renderer import RasterSettings
 from scene.resolution_policy import training_resolution
 from scene.scene import Scene
 from scene.trained import background_color, raster_settings
-from training.acquisition import acquire_views, seed_views
+from training.acquisition import acquire_views, check_memory_before_training, seed_views
 from training.config import TrainConfig, default_model_path, make_selector
 from training.optim import PositionLRSchedule
 from training.state import TrainState, capture_state, fresh_state, restore_state
@@ -121,6 +121,12 @@ def _open_run(cfg: TrainConfig, model_path: str) -> Run:
     else:
         train_views = seed_views(scene, cfg) if cfg.active.method else list(range(len(scene.train_cameras)))
         state = fresh_state(scene, cfg, train_views, plan.total_iterations)
+    selector = make_selector(cfg) if cfg.active.method else None
+    if selector is not None and state.stage < len(plan.adds):  # the next acquisition's Fisher pass at the largest
+        # model the run can reach: refused before any work (and before a fresh run writes anything)
+        check_memory_before_training(cfg, selector, state.gaussians, scene.train_cameras,
+                                     len(scene.train_cameras) - len(state.train_views))
+    if checkpoint is None:
         run_dir.start({**cfg.to_dict(), "total_iterations": plan.total_iterations, "dataset": scene.dataset_record()})
         scene.write_cameras_json()
         state.gaussians.save_ply(Path(model_path) / INPUT_PLY)
@@ -129,9 +135,8 @@ def _open_run(cfg: TrainConfig, model_path: str) -> Run:
                   f"the last step adds {plan.adds[-1]} view(s)")
     sessions = previous_sessions(run_dir.path / SELECTION) if checkpoint is not None else []
     sessions.append(session_record(iteration=state.iteration, device=cfg.model.device))
-    return Run(cfg, run_dir, scene, plan, make_selector(cfg) if cfg.active.method else None,
-               background_color(cfg.model), raster_settings(cfg.pipeline), state, rng,
-               PositionLRSchedule.from_config(cfg.optim, scene.extent), sessions=sessions)
+    return Run(cfg, run_dir, scene, plan, selector, background_color(cfg.model), raster_settings(cfg.pipeline), state,
+               rng, PositionLRSchedule.from_config(cfg.optim, scene.extent), sessions=sessions)
 
 
 def previous_sessions(selection_path: Path) -> list[dict[str, Any]]:

@@ -16,6 +16,8 @@ import utils.io
 from scene.ply_io import load_ply, save_ply
 from tests.scenes import random_gaussians
 from utils.errors import UserError
+from tests.conftest import run_cli
+from tests.test_resume import ARGS
 from utils.io import atomic_write, save_torch, write_json
 
 
@@ -127,3 +129,42 @@ def test_written_file_has_the_usual_mode_and_content(tmp_path):
     mask = os.umask(0)
     os.umask(mask)
     assert stat.S_IMODE((tmp_path / "a.txt").stat().st_mode) == 0o666 & ~mask  # not mkstemp's 0600
+
+
+FULL_DISK_RUNNER = """
+import atexit, errno, os, runpy, sys
+import utils.io
+limit, calls, real = int(sys.argv[1]), [0], utils.io._fsync
+def fsync(fd):
+    calls[0] += 1
+    if calls[0] > limit:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    real(fd)
+utils.io._fsync = fsync
+atexit.register(lambda: print(f"fsyncs: {calls[0]}"))
+sys.argv = ["train.py", *sys.argv[2:]]
+runpy.run_path("train.py", run_name="__main__")
+"""
+
+
+@pytest.mark.slow
+def test_full_disk_mid_run_is_one_line_and_the_resumed_run_matches_an_uninterrupted_one(tiny_scene, tmp_path):
+    """train.py whose disk fills (ENOSPC injected at an fsync half-way through its writes) stops with one `error:`
+    line; once space is back, the same command resumes and ends with the uninterrupted run's picks and metrics."""
+    def train(model, limit):
+        return run_cli("-c", FULL_DISK_RUNNER, str(limit), "-s", str(tiny_scene), "-m", str(model), *ARGS)
+
+    ref = train(tmp_path / "ref", 10**9)
+    assert ref.returncode == 0, ref.stderr
+    total = int(ref.stdout.rsplit("fsyncs: ", 1)[1].split()[0])
+    full = train(tmp_path / "full", total // 2)
+    assert full.returncode == 2, full.stdout + full.stderr
+    errors = [line for line in full.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "no space left on device" in errors[0] and "Traceback" not in full.stderr, full.stderr
+    assert not list((tmp_path / "full").rglob("*.tmp"))
+    assert json.loads((tmp_path / "full" / "run_status.json").read_text())["status"] == "running"
+    resumed = train(tmp_path / "full", 10**9)
+    assert resumed.returncode == 0 and "resuming from iteration" in resumed.stdout, resumed.stdout + resumed.stderr
+    a, b = (json.loads((tmp_path / d / "selection.json").read_text()) for d in ("ref", "full"))
+    assert [s["selected"] for s in a["stages"]] == [s["selected"] for s in b["stages"]]
+    assert abs(a["final"]["test_psnr"] - b["final"]["test_psnr"]) < 1e-6

@@ -51,6 +51,18 @@ def make_seed_dataset(data: Path, out: Path, num_seed: int, *, images: str = "im
                     "COLMAP one (sparse/0); point --data at one (convert.py makes a COLMAP one from photographs)")
 
 
+def training_centers(data: Path) -> torch.Tensor:
+    """The camera centres of a Blender or COLMAP dataset's training views, in train.py's order (COLMAP: sorted by
+    name, without --eval's test images). [V, 3] float64"""
+    if (data / "transforms_train.json").is_file():
+        cameras = read_pose_file(data / "transforms_train.json", default_size=(800, 800))
+    elif (data / "sparse" / "0").is_dir():
+        cameras = [c for i, c in enumerate(read_pose_file(data / "sparse" / "0")) if not held_out(i, LLFFHOLD)]
+    else:
+        raise UserError(f"{data} is neither a Blender dataset (transforms_train.json) nor a COLMAP one (sparse/0)")
+    return torch.stack([c.camera_center for c in cameras]).double()
+
+
 def _link(src: Path, dst: Path) -> None:
     dst.parent.mkdir(parents=True, exist_ok=True)
     if not dst.exists():
@@ -61,9 +73,7 @@ def _blender_seed_dataset(data: Path, folder: Path, num_seed: int) -> SeedDatase
     train = read_json(data / "transforms_train.json", what="dataset split", fix="fix or regenerate it")
     test = read_json(data / "transforms_test.json", what="dataset split", fix="fix or regenerate it")
     frames = train["frames"]
-    centers = torch.stack([c.camera_center for c in read_pose_file(data / "transforms_train.json",
-                                                                   default_size=(800, 800))])
-    seeds = farthest_point_views(centers.double(), num_seed)
+    seeds = farthest_point_views(training_centers(data), num_seed)
     candidates = [v for v in range(len(frames)) if v not in seeds]
     for frame in [frames[v] for v in seeds] + test["frames"]:
         ext = next((e for e in IMAGE_EXTENSIONS if (data / (frame["file_path"] + e)).is_file()), None)
@@ -84,10 +94,9 @@ def _colmap_seed_dataset(data: Path, folder: Path, num_seed: int, images: str) -
     sparse = data / "sparse" / "0"
     cams, imgs, (xyz, rgb) = colmap_io.read_model(sparse)
     ordered = sorted(imgs.values(), key=lambda im: im.name)  # the readers' order; held_out() splits it
-    poses = read_pose_file(sparse)  # the same order
     train = [i for i in range(len(ordered)) if not held_out(i, LLFFHOLD)]
     test = [i for i in range(len(ordered)) if held_out(i, LLFFHOLD)]
-    seeds = farthest_point_views(torch.stack([poses[i].camera_center for i in train]).double(), num_seed)
+    seeds = farthest_point_views(training_centers(data), num_seed)
     candidates = [v for v in range(len(train)) if v not in seeds]
     for i in [train[v] for v in seeds] + test:
         src = data / images / ordered[i].name

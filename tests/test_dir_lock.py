@@ -136,3 +136,12 @@ def test_second_writer_refuses_fast_and_the_first_run_completes(tiny_scene, tmp_
     assert len(json.loads((model / SELECTION).read_text())["stages"]) == 2
     assert point_cloud_ply(model, 400).is_file()
     assert not (model / LOCK_FILE).exists()
+    # the refused writers left no trace: the model equals one trained alone (same seed), byte for byte
+    alone = tmp_path / "alone"
+    run = start("train.py", *[str(alone) if a == str(model) else a for a in args])
+    assert run.wait(timeout=240) == 0, run.communicate()
+    assert point_cloud_ply(model, 400).read_bytes() == point_cloud_ply(alone, 400).read_bytes()
+    picks = [[s["selected"] for s in json.loads((d / SELECTION).read_text())["stages"]] for d in (model, alone)]
+    assert picks[0] == picks[1]
+    files = [sorted(p.relative_to(d) for p in d.rglob("*")) for d in (model, alone)]
+    assert files[0] == files[1]

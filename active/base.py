@@ -127,6 +127,17 @@ def logdet_oracle_kind(gain_weight: str) -> str:
     return "logdet" if check_gain_weight(gain_weight) == "none" else f"logdet_{gain_weight}"
 
 
+class LogDetSelector(Selector):
+    """A selector on the log-det oracle whose options (`config_class`, default values when none are given) carry
+    `gain_weight`: its oracle kind follows that weighting (`logdet_oracle_kind`)."""
+
+    config_class: type
+
+    def __init__(self, config: Any = None):
+        self.config = config if config is not None else self.config_class()
+        self.oracle_kind = logdet_oracle_kind(self.config.gain_weight)
+
+
 def check_eps(eps: float) -> float:
     """The accuracy parameter of the stochastic selectors must lie in (0, 1)."""
     if not 0.0 < eps < 1.0:

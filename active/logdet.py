@@ -34,7 +34,7 @@ ratios reach ~1e10, float32 accumulation leaves negative eigenvalues ~eps * |H|)
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Union
+from typing import Any, Callable, Union
 
 import torch
 
@@ -392,25 +392,34 @@ class BlockGainOracle:
         self.view_blocks = view_blocks
         self.weights = None if weights is None else weights.detach().double().to(information.chol.device)  # [N]
         self.evaluated = 0  # oracle evaluations since construction or `reset_counts`
-        self._best: tuple[int, float, ViewFactors] | None = None  # (view, gain, factors) since the last commit
+        self._best: tuple[int, float, Any] | None = None  # (view, gain, what `_score` returned) since the last commit
 
     def gain(self, view_id: int) -> float:
         """rho(v | S): one oracle evaluation."""
         self.evaluated += 1
-        view = self.information.view(self.view_blocks(view_id))
-        terms = self.information.gain_terms(view)  # [n] over the Gaussians the view sees
-        gain = float((terms if self.weights is None else terms * self.weights[view.indices]).sum())
+        gain, reusable = self._score(view_id)
         if self._best is None or gain > self._best[1]:
-            self._best = (view_id, gain, view)
+            self._best = (view_id, gain, reusable)
         return gain
 
     def commit(self, view_id: int) -> None:
-        """S <- S + {v}: adds H_v to the information (not an oracle evaluation)."""
+        """S <- S + {v}: adds H_v to the information (not an oracle evaluation), reusing the best gain's work since
+        the last commit when v is that view."""
         if self._best is not None and self._best[0] == view_id:
-            self.information.add(self._best[2])
+            self._add_scored(self._best[2])
         else:
             self.information.add(self.view_blocks(view_id))
         self._best = None
+
+    def _score(self, view_id: int) -> tuple[float, ViewFactors]:
+        """The gain of `view_id` and what a commit of it can reuse (its factors in the information's form)."""
+        view = self.information.view(self.view_blocks(view_id))
+        terms = self.information.gain_terms(view)  # [n] over the Gaussians the view sees
+        return float((terms if self.weights is None else terms * self.weights[view.indices]).sum()), view
+
+    def _add_scored(self, reusable: ViewFactors) -> None:
+        """Commit what `_score` returned."""
+        self.information.add(reusable)
 
     def reset_counts(self) -> None:
         self.evaluated = 0

@@ -234,19 +234,11 @@ class DenseGainOracle(BlockGainOracle):
     """The oracle before the sparse factors, over the dense twin: every gain whitens all N blocks [N, P, P]; a commit
     reuses the whitened blocks of the best gain since the last commit."""
 
-    def gain(self, view_id: int) -> float:
-        self.evaluated += 1
-        gain, w = self.information.gain_and_whitened(self.view_blocks(view_id))
-        if self._best is None or gain > self._best[1]:
-            self._best = (view_id, gain, w)
-        return gain
+    def _score(self, view_id: int) -> tuple[float, torch.Tensor]:
+        return self.information.gain_and_whitened(self.view_blocks(view_id))
 
-    def commit(self, view_id: int) -> None:
-        if self._best is not None and self._best[0] == view_id:
-            self.information.add_whitened(self._best[2])
-        else:
-            self.information.add(self.view_blocks(view_id))
-        self._best = None
+    def _add_scored(self, reusable: torch.Tensor) -> None:
+        self.information.add_whitened(reusable)
 
 
 def compare_dense(rows: list[dict]) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, BinaryIO, Callable
 
 import numpy as np
 
@@ -49,35 +50,39 @@ def _skip(fh, size: int) -> None:
         raise EOFError
 
 
-def read_cameras_binary(path: Path) -> dict[int, ColmapCamera]:
-    """`cameras.bin`: count, then per camera (id i32, model i32, width u64, height u64, params f64 x n)."""
-    cams = {}
+def _read_records(path: Path, read_one: Callable[[BinaryIO], tuple[int, Any]]) -> dict[int, Any]:
+    """A COLMAP binary file: a u64 count, then `count` records, each read by `read_one(fh) -> (id, record)`."""
     with open(path, "rb") as fh:
         (count,) = _read(fh, "Q")
-        for _ in range(count):
-            cid, model_id, width, height = _read(fh, "iiQQ")
-            name, n = CAMERA_MODELS[model_id]
-            cams[cid] = ColmapCamera(cid, name, width, height, np.array(_read(fh, "d" * n)))
-    return cams
+        return dict(read_one(fh) for _ in range(count))
+
+
+def _camera_record(fh: BinaryIO) -> tuple[int, ColmapCamera]:
+    cid, model_id, width, height = _read(fh, "iiQQ")
+    name, n = CAMERA_MODELS[model_id]
+    return cid, ColmapCamera(cid, name, width, height, np.array(_read(fh, "d" * n)))
+
+
+def _image_record(fh: BinaryIO) -> tuple[int, ColmapImage]:
+    iid, *rest = _read(fh, "idddddddi")
+    name = b""
+    while (ch := fh.read(1)) != b"\x00":
+        if not ch:
+            raise EOFError
+        name += ch
+    (num_points,) = _read(fh, "Q")
+    _skip(fh, 24 * num_points)  # (x, y, point3D_id) per 2D point: not needed
+    return iid, ColmapImage(iid, np.array(rest[:4]), np.array(rest[4:7]), rest[7], name.decode())
+
+
+def read_cameras_binary(path: Path) -> dict[int, ColmapCamera]:
+    """`cameras.bin`: count, then per camera (id i32, model i32, width u64, height u64, params f64 x n)."""
+    return _read_records(path, _camera_record)
 
 
 def read_images_binary(path: Path) -> dict[int, ColmapImage]:
     """`images.bin`: count, then per image (id, qvec wxyz, tvec, camera id, NUL-ended name, 2D points)."""
-    images = {}
-    with open(path, "rb") as fh:
-        (count,) = _read(fh, "Q")
-        for _ in range(count):
-            iid, *rest = _read(fh, "idddddddi")
-            qvec, tvec, cam_id = np.array(rest[:4]), np.array(rest[4:7]), rest[7]
-            name = b""
-            while (ch := fh.read(1)) != b"\x00":
-                if not ch:
-                    raise EOFError
-                name += ch
-            (num_points,) = _read(fh, "Q")
-            _skip(fh, 24 * num_points)  # (x, y, point3D_id) per 2D point: not needed
-            images[iid] = ColmapImage(iid, qvec, tvec, cam_id, name.decode())
-    return images
+    return _read_records(path, _image_record)
 
 
 def read_points_binary(path: Path) -> tuple[np.ndarray, np.ndarray]:

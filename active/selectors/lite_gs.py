@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-from active.base import (GAIN_WEIGHT_HELP, Selection, SelectionContext, Selector, check_eps, check_gain_weight, check_k,
-                         logdet_oracle_kind)
+from active.base import (GAIN_WEIGHT_HELP, LogDetSelector, Selection, SelectionContext, check_eps, check_gain_weight,
+                         check_k)
 from active.registry import register_selector
 from active.selectors.lazy_greedy import lazy_greedy_select
 
@@ -36,12 +36,10 @@ class LiteGSConfig:
 
 
 @register_selector("lite_gs", config=LiteGSConfig)
-class LiteGSSelector(Selector):
+class LiteGSSelector(LogDetSelector):
     """Stochastic lazy greedy with a fresh subset per pick."""
 
-    def __init__(self, config: LiteGSConfig = LiteGSConfig()):
-        self.config = config
-        self.oracle_kind = logdet_oracle_kind(config.gain_weight)
+    config_class = LiteGSConfig
 
     def conservative_count(self, m: int, k: int) -> int:
         k = min(k, m)

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from active.base import (GAIN_WEIGHT_HELP, GainOracle, Selection, SelectionContext, Selector, check_gain_weight,
-                         check_k, logdet_oracle_kind)
+from active.base import (GAIN_WEIGHT_HELP, GainOracle, LogDetSelector, Selection, SelectionContext, check_gain_weight,
+                         check_k)
 from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
 
@@ -35,15 +35,13 @@ class PopGSConfig:
 
 
 @register_selector("pop_gs", config=PopGSConfig)
-class PopGSSelector(Selector):
+class PopGSSelector(LogDetSelector):
     """Greedy maximisation of the log-det information gain: M - j oracles at pick j, ties to the lowest id.
 
     Counts: conservative = evaluated = sum_{j < min(K, M)} (M - j).
     """
 
-    def __init__(self, config: PopGSConfig = PopGSConfig()):
-        self.config = config
-        self.oracle_kind = logdet_oracle_kind(config.gain_weight)
+    config_class = PopGSConfig
 
     def conservative_count(self, m: int, k: int) -> int:
         return exhaustive_count(m, k)

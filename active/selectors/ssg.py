@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import torch
 
-from active.base import Selection, SelectionContext, Selector, check_k, logdet_oracle_kind
+from active.base import LogDetSelector, Selection, SelectionContext, check_k
 from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
 from active.selectors.lazy_greedy import lazy_greedy_select
@@ -21,12 +21,10 @@ def ssg_subset_size(m: int, k: int, eps: float) -> int:
 
 
 @register_selector("ssg", config=LiteGSConfig)  # the same options, eps and gain_weight
-class SSGSelector(Selector):
+class SSGSelector(LogDetSelector):
     """Lazy greedy over one random subset drawn once per stage."""
 
-    def __init__(self, config: LiteGSConfig = LiteGSConfig()):
-        self.config = config
-        self.oracle_kind = logdet_oracle_kind(config.gain_weight)
+    config_class = LiteGSConfig
 
     def conservative_count(self, m: int, k: int) -> int:
         k = min(k, m)

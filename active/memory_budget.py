@@ -59,8 +59,8 @@ PIXEL_BYTES = 64  # torch path: final colour and its prefix (3 float64 each), tr
 DENSE_PEAK_COPIES = 5  # [N, P, P] float64 copies alive while the prior is ridged and factorised (or inverted)
 DENSE_SUM_COPIES = 3  # ... while one training view is added to the prior
 DENSE_RESIDENT_COPIES = 2  # ... while the candidates are scored: A_0 and its Cholesky factor
-HEADROOM = 0.85  # a pass may take this share of the available memory; the rest covers the estimate's error:
-# estimate / measured peak resident memory 0.87-1.18 with every Gaussian seen (docs/performance.md)
+HEADROOM = 0.80  # a pass may take this share of the available memory; the rest covers the estimate's error:
+# estimate / measured peak resident memory 0.85-1.18 with every Gaussian seen (docs/performance.md)
 PASS_KINDS = ("logdet", "uncertainty", "diagonal")
 ORACLE_PASSES = {"logdet": "logdet", "logdet_opacity": "logdet", "diagonal": "diagonal",
                  "diagonal_reference": "diagonal", "coverage": None}  # oracle kind -> pass kind (None: no Fisher pass)

@@ -133,6 +133,7 @@ def fisher_view_diagonals(gaussians: GaussianModel, camera: Camera, background: 
 
 
 REFERENCE_DIAGONAL_GROUPS = ("means", "log_scales", "logit_opacities", "sh_dc", "sh_rest")  # FisherRF: no rotation
+DIAGONAL_GROUPS = {"diagonal": RAW_PARAMETER_GROUPS, "diagonal_reference": REFERENCE_DIAGONAL_GROUPS}  # per oracle kind
 
 
 def fisher_view_diagonals_reference(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,
@@ -281,8 +282,8 @@ class FisherViewBlocks:
     def __post_init__(self) -> None:
         if self.eviction not in EVICTION_POLICIES:
             raise ValueError(f"eviction must be one of {EVICTION_POLICIES}, got {self.eviction!r}")
-        diagonal_groups = REFERENCE_DIAGONAL_GROUPS if self.reference else RAW_PARAMETER_GROUPS
-        self.param_groups = diagonal_groups if self.diagonal else FISHER_PARAM_GROUPS[self.fisher.fisher_params]
+        self.param_groups = (DIAGONAL_GROUPS["diagonal_reference" if self.reference else "diagonal"] if self.diagonal
+                             else FISHER_PARAM_GROUPS[self.fisher.fisher_params])
         self.streaming = self.fisher.streaming
         self.cache_bytes = cache_budget(self.fisher.fisher_cache_mb)
 

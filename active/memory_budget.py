@@ -38,10 +38,9 @@ from typing import Callable
 import torch
 
 from arguments import FisherSettings
-from active.fisher import (FISHER_PARAM_GROUPS, ORACLE_KINDS, REFERENCE_DIAGONAL_GROUPS, available_memory_bytes,
-                           cache_budget, parameter_columns)
+from active.fisher import (DIAGONAL_GROUPS, FISHER_PARAM_GROUPS, ORACLE_KINDS, available_memory_bytes, cache_budget,
+                           parameter_columns)
 from active.trapezoid import packed_width
-from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from gaussian_renderer.tiles import NUM_GEOMETRY_ATTRIBUTES
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
@@ -65,7 +64,6 @@ PASS_KINDS = ("logdet", "uncertainty", "diagonal")
 ORACLE_PASSES = {"logdet": "logdet", "logdet_opacity": "logdet", "diagonal": "diagonal",
                  "diagonal_reference": "diagonal", "coverage": None}  # oracle kind -> pass kind (None: no Fisher pass)
 NO_FISHER_PASS = "use a selector without a Fisher pass (--method cover, coverage or random)"  # the CLIs' fallback
-DIAGONAL_GROUPS = {"diagonal": RAW_PARAMETER_GROUPS, "diagonal_reference": REFERENCE_DIAGONAL_GROUPS}
 assert set(ORACLE_PASSES) == set(ORACLE_KINDS)
 
 

@@ -41,9 +41,10 @@ from typing import Any
 import torch
 
 from active import build_selector
-from active.acquisition import FisherSettings, run_selection
+from active.acquisition import run_selection
 from active.base import Selection, SelectionContext, Selector
 from active.fisher import available_memory_bytes
+from arguments import FisherSettings
 from recommender.pipeline import LoadedModel, candidate_cameras, load_model, make_pool
 from scene.garden import GARDEN, load_garden
 from utils.errors import UserError, run_cli

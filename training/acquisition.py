@@ -67,25 +67,25 @@ DENSIFY_BYTES_PER_GAUSSIAN = 12  # the densification accumulators: gradient sum,
 
 
 def fit_selection_memory(cfg: TrainConfig, selector: Selector, gaussians: GaussianModel, cameras: list[Camera],
-                         num_candidates: int) -> acquisition.FisherSettings:
+                         num_candidates: int) -> FisherSettings:
     """The run's Fisher settings for an acquisition step over `num_candidates` of `cameras`, checked against the
     available memory (`active.memory_budget.fit_fisher_memory`: the cache lowered, or one `UserError` line naming
     the estimate and train.py's flags that help)."""
     return _fit_memory(cfg, selector, gaussians, cameras, num_candidates,
-                       acquisition.FisherSettings.from_active(cfg.active), gaussians.num_gaussians)
+                       FisherSettings.from_active(cfg.active), gaussians.num_gaussians)
 
 
 def check_memory_before_training(cfg: TrainConfig, selector: Selector, gaussians: GaussianModel,
                                  cameras: list[Camera], num_candidates: int) -> None:
     """`fit_selection_memory` at the largest model the run can grow to (its size or --max_gaussians), the growth
     in training counted, without the cache (each acquisition fits the cache to the memory it finds then)."""
-    fisher = replace(acquisition.FisherSettings.from_active(cfg.active), fisher_mode="streaming")
+    fisher = replace(FisherSettings.from_active(cfg.active), fisher_mode="streaming")
     _fit_memory(cfg, selector, gaussians, cameras, num_candidates, fisher,
                 max(gaussians.num_gaussians, cfg.densify.max_gaussians))
 
 
 def _fit_memory(cfg: TrainConfig, selector: Selector, gaussians: GaussianModel, cameras: list[Camera],
-                num_candidates: int, fisher: acquisition.FisherSettings, n_max: int) -> acquisition.FisherSettings:
+                num_candidates: int, fisher: FisherSettings, n_max: int) -> FisherSettings:
     """`fit_fisher_memory` of the selector's pass over `n_max` Gaussians (the growth from the model's size counted),
     with train.py's remedies: --fisher_params default, -r (half the width), --max_gaussians."""
     n_now = gaussians.num_gaussians

@@ -4,7 +4,8 @@ import json
 
 import pytest
 
-from experiments.seed_dataset import make_seed_dataset
+from active.schedule import farthest_point_views
+from experiments.seed_dataset import make_seed_dataset, training_centers
 from scene.dataset_readers import load_scene_info
 from scene.pose_files import read_pose_file
 from tests.conftest import ROOT, run_cli
@@ -39,20 +40,25 @@ def test_colmap_seed_dataset_keeps_seed_images_test_split_and_seed_points(tmp_pa
     names = sorted(name for *_, name in images)
     id_of = {name: iid for iid, *_, name in images}
     ids = [id_of[n] for n in names]
+    train = [n for i, n in enumerate(names) if i % 8]
+    seeds = farthest_point_views(training_centers(data), 3)  # the seeds it will take (train.py's seeding)
+    seed_id, candidate_ids = id_of[train[seeds[0]]], [id_of[n] for v, n in enumerate(train) if v not in seeds]
     (data / "sparse" / "0" / "points3D.txt").write_text(
         "1 0 0 0 255 0 0 0.5 " + " ".join(f"{i} 0" for i in ids) + "\n"  # seen by every view: kept
         f"2 1 1 1 0 255 0 0.5 {ids[0]} 0 {ids[8]} 0\n"  # seen by the test views only: dropped
-        "3 2 2 2 0 0 255 0.5\n")  # seen by none: dropped
+        "3 2 2 2 0 0 255 0.5\n"  # seen by none: dropped
+        f"4 3 3 3 9 9 9 0.5 {seed_id} 0 {candidate_ids[0]} 0\n"  # seen by one seed view: kept
+        "5 4 4 4 9 9 9 0.5 " + " ".join(f"{i} 0" for i in candidate_ids) + "\n")  # candidates only: dropped
     made = make_seed_dataset(data, tmp_path / "out", 3)
-    train = [n for i, n in enumerate(names) if i % 8]
+    assert made.seeds == seeds
     assert len(made.seeds) == 3 and sorted(made.seeds + made.candidates) == list(range(len(train)))
     folder = made.folder
     linked = sorted(p.name for p in (folder / "images").iterdir())
     assert linked == sorted([train[v] for v in made.seeds] + [names[0], names[8]])
-    assert "1 of 3 SfM points" in made.note
+    assert "2 of 5 SfM points" in made.note
     info = load_scene_info(str(folder), eval=True, skip_missing_images=True)
     assert [c.image_name for c in info.train_cameras] == [train[v].rsplit(".", 1)[0] for v in sorted(made.seeds)]
-    assert len(info.test_cameras) == 2 and len(info.point_cloud.points) == 1
+    assert len(info.test_cameras) == 2 and info.point_cloud.points.tolist() == [[0, 0, 0], [3, 3, 3]]
     listed = [c.image_name for c in read_pose_file(made.candidate_poses)]
     assert listed == [train[v].rsplit(".", 1)[0] for v in made.candidates]
     assert made.seed_flags == ["-i", "images", "--skip_missing_images"] and made.full_flags == ["-i", "images"]

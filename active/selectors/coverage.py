@@ -17,6 +17,8 @@ from active.registry import register_selector
 from utils.errors import UserError
 
 SPACES = ("centers", "directions")
+COVERAGE_SPACE_HELP = ("farthest-point sampling of camera centres, or of viewing directions on the unit sphere around "
+                       "the scene centre ('directions')")
 
 
 def coverage_points(ctx: SelectionContext, space: str) -> torch.Tensor:
@@ -33,9 +35,7 @@ def coverage_points(ctx: SelectionContext, space: str) -> torch.Tensor:
 
 @dataclass(frozen=True)
 class CoverageConfig:
-    coverage_space: str = field(default="centers", metadata={"help": "farthest-point sampling of camera centres, or "
-                                                                     "of viewing directions on the unit sphere around "
-                                                                     "the scene centre ('directions')"})
+    coverage_space: str = field(default="centers", metadata={"help": COVERAGE_SPACE_HELP})
 
     def __post_init__(self) -> None:
         if self.coverage_space not in SPACES:

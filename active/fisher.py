@@ -47,6 +47,7 @@ import torch
 
 from active.cover_oracle import CoverageOracle
 from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite, gram_root_factors
+from active.variance_oracle import RenderVarianceInformation
 from arguments import FisherSettings
 from gaussian_renderer import (RasterSettings, attribute_gram, project_and_shade, projection_jacobian,
                                seen_attribute_gram)
@@ -61,7 +62,7 @@ FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian f
     "default": ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
     "full_sh": ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest"),
 }
-ORACLE_KINDS = ("logdet", "logdet_opacity", "diagonal", "diagonal_reference", "coverage")  # build_oracle's kinds
+ORACLE_KINDS = ("logdet", "logdet_opacity", "render_variance", "diagonal", "diagonal_reference", "coverage")  # build_oracle's kinds
 FACTOR_STORAGE = torch.float32  # dtype of cached view factors (the float32 accuracy test: tests/test_view_factors.py)
 
 
@@ -411,6 +412,26 @@ class FisherOracle(_ViewStatistics, BlockGainOracle):
         weights = gaussians.opacities.detach() if gain_weight == "opacity" else None
         return cls(BlockInformation(prior, delta_rel=fisher.delta_rel, delta_abs=fisher.delta_abs), source, weights)
 
+    @classmethod
+    def build_render_variance(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
+                              background: torch.Tensor, settings: RasterSettings, *,
+                              fisher: FisherSettings = FisherSettings()) -> "FisherOracle":
+        """`build`'s oracle with gains = reductions of the predicted rendering variance over the candidate poses
+        (`active.variance_oracle`): the target T sums every candidate's blocks, one Fisher pass each before the
+        first gain (kept in the cache for the gains, as a cached stage keeps them anyway)."""
+        source = FisherViewBlocks(gaussians, cameras, background, settings, fisher)
+        prior = _prior(source, train_views, len(cameras))
+        taken = set(train_views)
+        candidates = [v for v in range(len(cameras)) if v not in taken]
+
+        def dense_view(v: int) -> torch.Tensor:
+            blocks = source(v)
+            return blocks.dense() if isinstance(blocks, ViewFactors) else blocks.double().clone()
+
+        target = summed_views(dense_view, candidates) if candidates else torch.zeros_like(prior)
+        information = RenderVarianceInformation(prior, target, delta_rel=fisher.delta_rel, delta_abs=fisher.delta_abs)
+        return cls(information, source)
+
 
 class DiagonalGainOracle:
     """A counted `active.base.DiagonalOracle`: h = the prior diagonal plus the committed views' diagonals, and any
@@ -460,13 +481,16 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
                  background: torch.Tensor, settings: RasterSettings, *, fisher: FisherSettings = FisherSettings()
                  ) -> FisherOracle | DiagonalFisherOracle | CoverageOracle:
     """The oracle of `kind` (a selector's `oracle_kind`): "logdet" -> `FisherOracle` (ridge and `fisher_params`
-    apply), "logdet_opacity" -> the same with each Gaussian's term weighted by its opacity, "diagonal" ->
+    apply), "logdet_opacity" -> the same with each Gaussian's term weighted by its opacity, "render_variance" -> the
+    same blocks scored by the predicted rendering variance they remove over the candidate poses, "diagonal" ->
     `DiagonalFisherOracle` (every raw parameter group, no ridge), "diagonal_reference" -> the same over FisherRF's
     code's diagonal (`fisher_view_diagonals_reference`), "coverage" -> COVER's geometric `CoverageOracle` (no Fisher
     pass; the Fisher options do not apply)."""
     if kind in ("logdet", "logdet_opacity"):
         return FisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher,
                                   gain_weight="opacity" if kind == "logdet_opacity" else "none")
+    if kind == "render_variance":
+        return FisherOracle.build_render_variance(gaussians, cameras, train_views, background, settings, fisher=fisher)
     if kind == "coverage":
         return CoverageOracle(gaussians.means, gaussians.opacities, cameras, train_views)
     if kind in ("diagonal", "diagonal_reference"):

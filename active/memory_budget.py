@@ -61,8 +61,10 @@ DENSE_RESIDENT_COPIES = 2  # ... while the candidates are scored: A_0 and its Ch
 HEADROOM = 0.80  # a pass may take this share of the available memory; the rest covers the estimate's error:
 # estimate / measured peak resident memory 0.85-1.18 with every Gaussian seen (docs/performance.md)
 PASS_KINDS = ("logdet", "uncertainty", "diagonal")
-ORACLE_PASSES = {"logdet": "logdet", "logdet_opacity": "logdet", "diagonal": "diagonal",
-                 "diagonal_reference": "diagonal", "coverage": None}  # oracle kind -> pass kind (None: no Fisher pass)
+# oracle kind -> pass kind (None: no Fisher pass); render_variance holds one more [N, P, P] copy (its target) than
+# the log-det while scoring, inside HEADROOM's margin at the scale of the measurements
+ORACLE_PASSES = {"logdet": "logdet", "logdet_opacity": "logdet", "render_variance": "logdet", "diagonal": "diagonal",
+                 "diagonal_reference": "diagonal", "coverage": None}
 NO_FISHER_PASS = "use a selector without a Fisher pass (--method cover, coverage or random)"  # the CLIs' fallback
 assert set(ORACLE_PASSES) == set(ORACLE_KINDS)
 

@@ -76,7 +76,7 @@ def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dic
             break
         t0 = time.perf_counter()
         model = load_model(model_path)
-        pool = make_pool(model, candidate_cameras(f"hemisphere:{args.candidates}", model))
+        pool = make_pool(model, candidate_cameras(f"hemisphere:{args.candidates}", model, elevation=args.elevation))
         k = min(args.k, args.budget - len(frames))
         rec = recommend(model, pool, build_selector(method), k, seed=seed * 1000 + len(rounds))
         write_outputs(rec, model, out / f"recommend_{len(frames):02d}", candidates_spec=f"hemisphere:{args.candidates}",
@@ -90,20 +90,38 @@ def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dic
     return result
 
 
+def loop_results(root: Path) -> dict[str, tuple[list[int], torch.Tensor]]:
+    """Per method folder of `root`: the view counts of its rounds and the test PSNR of every seed [S, R]."""
+    out = {}
+    for method_dir in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("builtin")):
+        runs = [read_json(p, fix="rerun scripts/capture_loop.py to write it again")
+                for p in sorted(method_dir.glob("seed*/loop.json"))]
+        if runs:
+            out[method_dir.name] = ([r["views"] for r in runs[0]["rounds"]],
+                                    torch.tensor([[r["test_psnr"] for r in run["rounds"]] for run in runs]))
+    return out
+
+
+def summary_table(root: Path) -> str:
+    """Markdown: one row per method, test PSNR mean +- std over seeds at each view count."""
+    results = loop_results(root)
+    views = next(iter(results.values()))[0] if results else []
+    lines = ["| method | seeds | " + " | ".join(f"{v} views" for v in views) + " |",
+             "|---|---|" + "---|" * len(views)]
+    for method, (_, values) in results.items():
+        cells = [f"{float(m):.2f} ± {float(s):.2f}" for m, s in zip(values.mean(0), values.std(0, correction=0))]
+        lines.append(f"| {method} | {values.shape[0]} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def plot(root: Path, png: Path) -> None:
     """PSNR vs views, mean and min/max over seeds, one line per method."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6, 4))
-    for method_dir in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("builtin")):
-        runs = [read_json(p, fix="rerun scripts/capture_loop.py to write it again")
-                for p in sorted(method_dir.glob("seed*/loop.json"))]
-        if not runs:
-            continue
-        views = [r["views"] for r in runs[0]["rounds"]]
-        values = torch.tensor([[r["test_psnr"] for r in run["rounds"]] for run in runs])  # [S, R]
-        ax.plot(views, values.mean(0), marker="o", label=f"{method_dir.name} ({len(runs)} seeds)")
+    for method, (views, values) in loop_results(root).items():
+        ax.plot(views, values.mean(0), marker="o", label=f"{method} ({values.shape[0]} seeds)")
         ax.fill_between(views, values.min(0).values, values.max(0).values, alpha=0.15)
     ax.set_xlabel("captured views")
     ax.set_ylabel("test PSNR (dB)")
@@ -126,5 +144,7 @@ def run_capture_loop(args: argparse.Namespace) -> None:
     for method in args.methods:
         for seed in args.seeds:
             run_loop(method, seed, root / method / f"seed{seed}", args)
+    (root / "summary.md").write_text(summary_table(root))
+    print((root / "summary.md").read_text())
     plot(root, Path(args.png))
 

@@ -6,10 +6,11 @@ truth there, and repeats until the view budget. Test PSNR (the built-in test spl
 training, so each method gives a PSNR-vs-views curve.
 
     python scripts/capture_loop.py --methods lite_gs pop_gs coverage random --seeds 0 1 2 -o output/capture_loop
+    python scripts/capture_loop.py --elevation 10,75 ...      # candidates over the test views' elevations only
     python scripts/capture_loop.py --plot output/capture_loop --png docs/results/capture_loop/psnr_vs_views.png
 
 Each (method, seed) writes OUT/METHOD/seedS/loop.json: per round the views, test PSNR and the seconds spent
-training and recommending.
+training and recommending; OUT/summary.md tables the test PSNR per method and view count (mean +- std over seeds).
 """
 from __future__ import annotations
 
@@ -17,6 +18,17 @@ import argparse
 
 from experiments.closed_capture_loop import run_capture_loop
 from utils.errors import run_cli
+
+
+def elevation_range(text: str) -> tuple[float, float]:
+    """"LO,HI" in degrees, -89 <= LO < HI <= 89."""
+    try:
+        lo, hi = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--elevation takes LO,HI in degrees (e.g. 10,75), got {text!r}") from None
+    if not -89.0 <= lo < hi <= 89.0:
+        raise argparse.ArgumentTypeError(f"--elevation needs -89 <= LO < HI <= 89 degrees, got {text!r}")
+    return lo, hi
 
 
 def main() -> None:
@@ -29,6 +41,8 @@ def main() -> None:
     p.add_argument("--budget", type=int, default=9, help="views at the end")
     p.add_argument("-k", type=int, default=2, help="views recommended per round")
     p.add_argument("--candidates", type=int, default=30, help="generated hemisphere poses per round")
+    p.add_argument("--elevation", type=elevation_range, default=(0.0, 80.0),
+                   help="the candidates' elevation range LO,HI in degrees (default 0,80; the test views lie at 10-75)")
     p.add_argument("--iters_per_view", type=int, default=60, help="training iterations per captured view")
     p.add_argument("--max_gaussians", type=int, default=4000)
     p.add_argument("--plot", help="only draw the curve of an output folder")

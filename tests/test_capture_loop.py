@@ -6,7 +6,7 @@ import math
 import pytest
 import torch
 
-from experiments.closed_capture_loop import capture, run_capture_loop
+from experiments.closed_capture_loop import capture, run_capture_loop, summary_table
 from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions
 from scene.cameras import look_at
 from scene.frames import GL_TO_CV
@@ -48,15 +48,38 @@ def test_plot_only_draws_every_method_folder(tmp_path):
     assert not (tmp_path / "unused").exists()
 
 
+def test_summary_tables_mean_and_std_over_seeds(tmp_path):
+    for seed, psnr in ((0, 20.0), (1, 22.0)):
+        folder = tmp_path / "random" / f"seed{seed}"
+        folder.mkdir(parents=True)
+        rounds = [{"views": 3, "test_psnr": psnr}, {"views": 5, "test_psnr": psnr + 1}]
+        (folder / "loop.json").write_text(json.dumps({"method": "random", "seed": seed, "rounds": rounds}))
+    table = summary_table(tmp_path)
+    assert "| method | seeds | 3 views | 5 views |" in table
+    assert "| random | 2 | 21.00 ± 1.00 | 22.00 ± 1.00 |" in table
+
+
+@pytest.mark.parametrize("bad", ["10", "80,10", "a,b", "0,95"])
+def test_a_bad_elevation_range_is_one_error_line(bad, tmp_path):
+    r = run_cli(str(ROOT / "scripts" / "capture_loop.py"), "--elevation", bad, "-o", str(tmp_path / "x"))
+    assert r.returncode == 2 and "--elevation" in r.stderr.strip().splitlines()[-1]
+    assert not (tmp_path / "x").exists()
+
+
 @pytest.mark.slow
 def test_the_cli_runs_one_round(tmp_path):
     out = tmp_path / "loop"
     r = run_cli(str(ROOT / "scripts" / "capture_loop.py"), "--methods", "coverage", "--seeds", "0", "-o", str(out),
                 "--resolution", "16", "--num_test", "2", "--budget", "5", "-k", "2", "--candidates", "6",
-                "--iters_per_view", "10", "--max_gaussians", "500", "--png", str(tmp_path / "psnr.png"), timeout=600)
+                "--iters_per_view", "10", "--max_gaussians", "500", "--png", str(tmp_path / "psnr.png"),
+                "--elevation", "10,75", timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     loop = json.loads((out / "coverage" / "seed0" / "loop.json").read_text())
     assert [r["views"] for r in loop["rounds"]] == [3, 5]
     assert loop["settings"]["plot"] is None and loop["settings"]["budget"] == 5
-    assert (out / "coverage" / "seed0" / "recommend_03" / "recommendations.json").is_file()
+    rec = json.loads((out / "coverage" / "seed0" / "recommend_03" / "recommendations.json").read_text())
+    for pick in rec["picks"]:  # the built-in scene: up = +z, centred at the origin
+        x, y, z = pick["c2w"][0][3], pick["c2w"][1][3], pick["c2w"][2][3]
+        assert 10 - 1e-3 <= math.degrees(math.atan2(z, math.hypot(x, y))) <= 75 + 1e-3
+    assert "| coverage | 1 |" in (out / "summary.md").read_text()
     assert (tmp_path / "psnr.png").is_file()

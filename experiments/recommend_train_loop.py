@@ -73,7 +73,8 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
     method and seed recommend.py and the continued training; writes OUT/results.json and OUT/summary.md, reusing the
     finished steps."""
     data, out = Path(args.data), Path(args.output)
-    seed_data = make_seed_dataset(data, out, args.num_seed_views, images=args.images)  # a bad --data: nothing written
+    seed_data = make_seed_dataset(data, out, args.num_seed_views, images=args.images,
+                                  seed_points=args.seed_points)  # a bad --data: nothing written
     (out / "logs").mkdir(parents=True, exist_ok=True)
     seeds, candidates = seed_data.seeds, seed_data.candidates
     print(f"seed views {seeds}; {len(candidates)} candidate poses in {seed_data.candidate_poses} (their images are "

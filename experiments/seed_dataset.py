@@ -5,7 +5,9 @@ Seeds are farthest-point samples of the training cameras' centres (as train.py s
 SfM points are the points that a seed image observes, so that the seed model starts from the geometry its S captures
 see, not from all the points triangulated with the candidates' images. (Asking for two seed observations keeps almost
 nothing: sequential matching links only neighbouring images, and farthest-point seeds are far apart: 10 of bonsai's
-35,102 points.)
+35,102 points.) `seed_points="all"` keeps every point instead, as train.py's Setup 1 initialises from the whole SfM
+model: a diagnosis (what the Fisher does when the model already holds Gaussians where no capture looked), not a
+capture a user could make.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ from utils.io import read_json, write_json
 
 IMAGE_EXTENSIONS = (".png", ".jpg", "")  # a Blender frame's file_path names its image without (or with) one
 MIN_SEED_OBSERVATIONS = 1  # a kept SfM point is observed by this many seed images
+SEED_POINTS = ("observed", "all")  # which SfM points a COLMAP seed folder keeps
 
 
 @dataclass
@@ -39,14 +42,18 @@ class SeedDataset:
     note: str = ""  # what was kept, for the log
 
 
-def make_seed_dataset(data: Path, out: Path, num_seed: int, *, images: str = "images") -> SeedDataset:
+def make_seed_dataset(data: Path, out: Path, num_seed: int, *, images: str = "images",
+                      seed_points: str = "observed") -> SeedDataset:
     """OUT/data for a Blender (transforms_train/test.json) or COLMAP (sparse/0) dataset `data`; `images` is
-    train.py's -i of a COLMAP dataset, whose test split is train.py's --eval split. Raises UserError for any other
-    layout, a missing image, or candidate images present in OUT/data."""
+    train.py's -i of a COLMAP dataset, whose test split is train.py's --eval split; `seed_points` (COLMAP): keep the
+    SfM points a seed view observes, or all. Raises UserError for any other layout, a missing image, or candidate
+    images present in OUT/data."""
+    if seed_points not in SEED_POINTS:
+        raise UserError(f"--seed_points must be one of {', '.join(SEED_POINTS)}, got {seed_points!r}")
     if (data / "transforms_train.json").is_file() and (data / "transforms_test.json").is_file():
         return _blender_seed_dataset(data, out / "data", num_seed)
     if (data / "sparse" / "0").is_dir():
-        return _colmap_seed_dataset(data, out / "data", num_seed, images)
+        return _colmap_seed_dataset(data, out / "data", num_seed, images, seed_points == "all")
     raise UserError(f"{data} is neither a Blender dataset (transforms_train.json and transforms_test.json) nor a "
                     "COLMAP one (sparse/0); point --data at one (convert.py makes a COLMAP one from photographs)")
 
@@ -90,7 +97,7 @@ def _blender_seed_dataset(data: Path, folder: Path, num_seed: int) -> SeedDatase
     return SeedDataset(folder, seeds, candidates, folder / "candidates.json", ["-w"], ["-w"])
 
 
-def _colmap_seed_dataset(data: Path, folder: Path, num_seed: int, images: str) -> SeedDataset:
+def _colmap_seed_dataset(data: Path, folder: Path, num_seed: int, images: str, all_points: bool) -> SeedDataset:
     sparse = data / "sparse" / "0"
     cams, imgs, (xyz, rgb) = colmap_io.read_model(sparse)
     ordered = sorted(imgs.values(), key=lambda im: im.name)  # the readers' order; held_out() splits it
@@ -105,7 +112,8 @@ def _colmap_seed_dataset(data: Path, folder: Path, num_seed: int, images: str) -
         _link(src, folder / images / ordered[i].name)
     seed_ids = np.array([ordered[train[v]].id for v in seeds])
     tracks = colmap_io.read_point_tracks(sparse)
-    keep = np.array([len(np.intersect1d(t, seed_ids)) >= MIN_SEED_OBSERVATIONS for t in tracks], dtype=bool)
+    keep = np.array([all_points or len(np.intersect1d(t, seed_ids)) >= MIN_SEED_OBSERVATIONS for t in tracks],
+                    dtype=bool)
     if not keep.any():
         raise UserError(f"{sparse}: no SfM point is observed by the {num_seed} seed views; use more seed views "
                         "(--num_seed_views)")
@@ -115,6 +123,7 @@ def _colmap_seed_dataset(data: Path, folder: Path, num_seed: int, images: str) -
     present = [ordered[train[v]].name for v in candidates if (folder / images / ordered[train[v]].name).exists()]
     if present:
         raise UserError(f"{folder / images}: candidate images are present ({present[:5]}); remove them")
-    note = f"{int(keep.sum())} of {len(keep)} SfM points kept (observed by a seed view)"
+    note = f"{int(keep.sum())} of {len(keep)} SfM points kept " + \
+        ("(all: also those only candidates observe)" if all_points else "(observed by a seed view)")
     return SeedDataset(folder, seeds, candidates, folder / "candidates", ["-i", images, "--skip_missing_images"],
                        ["-i", images], note)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 
 from experiments.recommend_train_loop import run_recommend_then_train
+from experiments.seed_dataset import SEED_POINTS
 from utils.errors import run_cli
 
 
@@ -27,6 +28,9 @@ def main() -> None:
                    help="Blender dataset (transforms_train/test.json) or COLMAP one (sparse/0; test split: --eval's)")
     p.add_argument("-i", "--images", default="images", help="a COLMAP dataset's image folder (train.py's -i)")
     p.add_argument("-o", "--output", default="output/recommend_then_train")
+    p.add_argument("--seed_points", choices=SEED_POINTS, default="observed",
+                   help="COLMAP: the seed model starts from the SfM points a seed view observes (a real capture), or "
+                        "from all of them (a diagnosis: Gaussians also where only candidates looked)")
     p.add_argument("--methods", nargs="+", default=["lite_gs", "coverage", "random", "none"],
                    help="recommend.py selectors, NAME or NAME+OPTION=VALUE (e.g. pop_gs+gain_weight=opacity), "
                         "and 'none' (no new views)")

@@ -62,6 +62,10 @@ def test_colmap_seed_dataset_keeps_seed_images_test_split_and_seed_points(tmp_pa
     listed = [c.image_name for c in read_pose_file(made.candidate_poses)]
     assert listed == [train[v].rsplit(".", 1)[0] for v in made.candidates]
     assert made.seed_flags == ["-i", "images", "--skip_missing_images"] and made.full_flags == ["-i", "images"]
+    every = make_seed_dataset(data, tmp_path / "all", 3, seed_points="all")  # the diagnosis: every point kept
+    assert "5 of 5 SfM points" in every.note and every.seeds == made.seeds
+    with pytest.raises(UserError, match="--seed_points must be one of observed, all"):
+        make_seed_dataset(data, tmp_path / "bad", 3, seed_points="some")
 
 
 def test_seed_dataset_refuses_other_layouts(tmp_path):

@@ -49,6 +49,13 @@ def gaussian_groups(gaussians: GaussianModel, cameras: list[Camera], train_ids: 
     }
 
 
+def fractions(terms: torch.Tensor, groups: dict[str, dict[str, torch.Tensor]]) -> dict[str, dict[str, float]]:
+    """The share of sum(terms) [N] in each group's bins (0 for a zero total)."""
+    total = float(terms.sum())
+    return {key: {k: (float(terms[m].sum()) / total if total > 0 else 0.0) for k, m in masks.items()}
+            for key, masks in groups.items()}
+
+
 def per_gaussian_gains(oracle: FisherOracle, view_id: int) -> torch.Tensor:
     """The oracle's log-det terms of one candidate scattered to every Gaussian (0 where it sees none). [N] float64"""
     info = oracle.information
@@ -67,11 +74,12 @@ def _rank_correlation(x: list[float], y: list[float]) -> float:
 def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[int], candidate_ids: list[int],
              background: torch.Tensor, settings: Any, *, fisher: FisherSettings = FisherSettings(), top: int = 8,
              names: dict[int, str] | None = None) -> dict[str, Any]:
-    """The breakdown of every candidate's first-pick log-det gain over its Gaussians, the spread of the gains, and
-    the rank correlation with the opacity-weighted gain and COVER's gain. Returns a JSON-able dict; the per-Gaussian
+    """The breakdown of every candidate's first-pick log-det gain (and render-variance gain) over its Gaussians, the
+    spread of the gains, and the rank correlation with the opacity-weighted, render-variance and COVER gains. Returns a JSON-able dict; the per-Gaussian
     gains of the top pick are under the private key "_top_terms" ([N] tensor)."""
     oracle = FisherOracle.build(gaussians, cameras, train_ids, background, settings,
                                 fisher=replace(fisher, fisher_mode="streaming"))
+    variance = FisherOracle.build_render_variance(gaussians, cameras, train_ids, background, settings, fisher=fisher)
     prior = oracle.information.prior_matrix  # H0 + ridge [N, P, P]
     diag_max = torch.diagonal(prior, dim1=-2, dim2=-1).amax(-1).cpu()
     prior_seen = diag_max > fisher.delta_abs * (1 + 1e-6) + 1e-300  # an all-zero prior block holds only the ridge
@@ -85,8 +93,9 @@ def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[in
         row: dict[str, Any] = {"id": v, "name": (names or {}).get(v, str(v)), "gain": gain,
                                "gain_opacity": float((t * opacity).sum()), "gain_cover": cover.gain(v),
                                "visible": int((t > 0).sum())}
-        for key, masks in groups.items():
-            row[key] = {k: (float(t[m].sum()) / gain if gain > 0 else 0.0) for k, m in masks.items()}
+        row.update(fractions(t, groups))
+        tv = per_gaussian_gains(variance, v)
+        row["gain_variance"], row["variance"] = float(tv.sum()), fractions(tv, groups)
         nz = t[t > 0]
         row["median_term"] = float(nz.median()) if nz.numel() else 0.0
         if nz.numel():
@@ -106,12 +115,14 @@ def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[in
         summary[key] = {k: {"mean_fraction": sum(r[key][k] for r in rows) / len(rows),
                             "pooled_fraction": sum(r[key][k] * r["gain"] for r in rows) / total if total else 0.0,
                             "gaussians": int(m.sum())} for k, m in masks.items()}
+    summary_variance = {key: {k: sum(r["variance"][key][k] for r in rows) / len(rows) for k in masks}
+                        for key, masks in groups.items()}  # mean fraction of the render-variance gain
     by_id = {r["id"]: r for r in rows}
     ids = [r["id"] for r in rows]
     x = [by_id[i]["gain"] for i in ids]
     result = {
         "num_gaussians": gaussians.num_gaussians, "num_candidates": len(rows), "train_ids": list(train_ids),
-        "top": top_rows, "candidates": rows, "summary": summary,
+        "top": top_rows, "candidates": rows, "summary": summary, "summary_variance": summary_variance,
         "spread": {"min": min(gains), "max": g_max,
                    "min_pct_of_max": 100 * min(gains) / g_max if g_max else 0.0,
                    "top8_range_pct": 100 * (top_rows[0]["gain"] - top_rows[-1]["gain"]) / g_max if g_max else 0.0},
@@ -121,10 +132,12 @@ def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[in
             "logdet_vs_opacity": _rank_correlation(x, [by_id[i]["gain_opacity"] for i in ids]),
             "logdet_vs_cover": _rank_correlation(x, [by_id[i]["gain_cover"] for i in ids]),
             "opacity_vs_cover": _rank_correlation([by_id[i]["gain_opacity"] for i in ids], [by_id[i]["gain_cover"] for i in ids]),
+            "logdet_vs_variance": _rank_correlation(x, [by_id[i]["gain_variance"] for i in ids]),
         },
         "top_picks": {"logdet": [by_id[i]["name"] for i in ids[:4]],
                       "opacity": [r["name"] for r in sorted(rows, key=lambda r: -r["gain_opacity"])[:4]],
-                      "cover": [r["name"] for r in sorted(rows, key=lambda r: -r["gain_cover"])[:4]]},
+                      "cover": [r["name"] for r in sorted(rows, key=lambda r: -r["gain_cover"])[:4]],
+                      "render_variance": [r["name"] for r in sorted(rows, key=lambda r: -r["gain_variance"])[:4]]},
         "_top_terms": terms_of[rows[0]["id"]] if rows else None,
     }
     return result
@@ -143,12 +156,14 @@ def markdown(d: dict[str, Any], title: str) -> str:
         cells = [r["name"], f"{r['gain']:.1f}", str(r["visible"])]
         cells += [pct(r[k][b]) for k, bins in keys for b in bins] + [pct(r["top1pct_share"])]
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "## All candidates (mean fraction % / pooled fraction % / Gaussians in the group)", "",
-              "| group | bin | mean % | pooled % | Gaussians |", "|---|---|---|---|---|"]
+    lines += ["", "## All candidates (mean fraction % / pooled fraction % / Gaussians in the group; last column: mean "
+              "fraction % of the render-variance gain)", "",
+              "| group | bin | mean % | pooled % | Gaussians | render variance mean % |", "|---|---|---|---|---|---|"]
     for k, bins in keys:
         for b in bins:
             s = d["summary"][k][b]
-            lines.append(f"| {k} | {b} | {pct(s['mean_fraction'])} | {pct(s['pooled_fraction'])} | {s['gaussians']} |")
+            lines.append(f"| {k} | {b} | {pct(s['mean_fraction'])} | {pct(s['pooled_fraction'])} | {s['gaussians']} | "
+                         f"{pct(d['summary_variance'][k][b])} |")
     sp, rc = d["spread"], d["rank_correlation"]
     lines += ["", "## Spread and concentration", "",
               f"- first-pick gains: min {sp['min']:.1f}, max {sp['max']:.1f} (min = {sp['min_pct_of_max']:.1f} % of max); "
@@ -159,7 +174,8 @@ def markdown(d: dict[str, Any], title: str) -> str:
               "## Rank correlation of candidates (Spearman)", "",
               f"- log-det vs opacity-weighted log-det: {rc['logdet_vs_opacity']:.3f}",
               f"- log-det vs cover: {rc['logdet_vs_cover']:.3f}",
-              f"- opacity-weighted vs cover: {rc['opacity_vs_cover']:.3f}", "",
+              f"- opacity-weighted vs cover: {rc['opacity_vs_cover']:.3f}",
+              f"- log-det vs render variance: {rc['logdet_vs_variance']:.3f}", "",
               "Top-4 by criterion: " + "; ".join(f"{k}: {', '.join(v)}" for k, v in d["top_picks"].items()), "",
               "## Picks vs training length", "",
               "Train the same captured views for N iterations (train.py -s DATA -r 4 --eval -w -q --num_random_points "

@@ -43,4 +43,10 @@ def test_fractions_sum_to_one_and_match_brute_force():
                 brute = sum(float(terms[i]) for i in range(12) if bool(mask[i]))
                 assert math.isclose(row[key][b], brute / row["gain"], rel_tol=1e-9, abs_tol=1e-12)
     assert d["spread"]["max"] == d["candidates"][0]["gain"]
-    assert set(d["rank_correlation"]) == {"logdet_vs_opacity", "logdet_vs_cover", "opacity_vs_cover"}
+    assert set(d["rank_correlation"]) == {"logdet_vs_opacity", "logdet_vs_cover", "opacity_vs_cover",
+                                          "logdet_vs_variance"}
+    variance = FisherOracle.build_render_variance(model, cams, [0], BG, settings)
+    for row in d["candidates"]:  # the render-variance breakdown: the oracle's gain, shares summing to one
+        assert math.isclose(row["gain_variance"], variance.gain(row["id"]), rel_tol=1e-9)
+        for key in ("prior", "opacity", "frustum", "distance"):
+            assert math.isclose(sum(row["variance"][key].values()), 1.0, rel_tol=1e-9, abs_tol=1e-12)

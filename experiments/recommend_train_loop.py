@@ -68,6 +68,40 @@ def summary_table(results: dict, methods: list[str], seeds: list[int]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def compare_table(results: dict[str, dict], methods: list[str] | None = None) -> str:
+    """Across scenes (`results`: scene name -> a results.json's content): per method, its mean test PSNR minus
+    random's and minus coverage's on each scene, the worst of each, and in how many scene-seeds it is last among
+    `methods` (default: the methods with every seed on every scene, "none" left out)."""
+    seeds = {name: sorted({int(k.rsplit("seed", 1)[1]) for k in r if "/seed" in k}) for name, r in results.items()}
+    if methods is None:  # in the first scene's order
+        per_scene = [list(dict.fromkeys(k.rsplit("/", 1)[0] for k in r if "/seed" in k)) for r in results.values()]
+        methods = [m for m in per_scene[0] if m != "none" and all(m in found for found in per_scene)
+                   and all(f"{m}/seed{x}" in results[n] for n in results for x in seeds[n])]
+    for required in ("random", "coverage"):
+        if required not in methods:
+            raise UserError(f"comparing recommend-then-train results needs {required!r} on every scene and seed")
+    mean = {(n, m): statistics.mean(results[n][f"{m}/seed{x}"]["test_psnr"] for x in seeds[n])
+            for n in results for m in methods}
+    last = {m: 0 for m in methods}
+    for n in results:
+        for x in seeds[n]:
+            values = {m: results[n][f"{m}/seed{x}"]["test_psnr"] for m in methods}
+            low = min(values.values())
+            for m, v in values.items():
+                last[m] += v == low
+    head = [f"{n} vs random / vs coverage" for n in results]
+    lines = ["| selector | " + " | ".join(head) + " | worst vs random | worst vs coverage | last in |",
+             "|---|" + "---|" * (len(head) + 3)]
+    total = sum(len(seeds[n]) for n in results)
+    for m in methods:
+        d_random = [mean[n, m] - mean[n, "random"] for n in results]
+        d_cover = [mean[n, m] - mean[n, "coverage"] for n in results]
+        cells = [f"{a:+.2f} / {b:+.2f}" for a, b in zip(d_random, d_cover)]
+        lines.append(f"| {m} | " + " | ".join(cells) + f" | {min(d_random):+.2f} | {min(d_cover):+.2f} | "
+                     f"{last[m]} of {total} |")
+    return "\n".join(lines) + "\n"
+
+
 def run_recommend_then_train(args: argparse.Namespace) -> None:
     """The whole experiment for scripts/recommend_then_train.py's parsed flags (`args`): the seed-view model, then per
     method and seed recommend.py and the continued training; writes OUT/results.json and OUT/summary.md, reusing the

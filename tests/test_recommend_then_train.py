@@ -91,3 +91,25 @@ def test_end_to_end_on_the_tiny_scene(tiny_scene, tmp_path):
         cfg = json.loads((out / "continue" / key.replace("/", "_") / "cfg_args").read_text())
         assert cfg["model"]["init_ply"].endswith("point_cloud.ply")  # continued from the seed model
     assert "| coverage |" in (out / "summary.md").read_text()
+
+
+def _results(values: dict[str, list[float]]) -> dict:
+    return {"settings": {}, **{f"{m}/seed{s}": {"test_psnr": v} for m, vs in values.items() for s, v in enumerate(vs)}}
+
+
+def test_compare_table_differences_worst_cases_and_last_places(tmp_path):
+    lego = _results({"coverage": [18.0, 18.2], "random": [17.0, 19.0], "pop_gs": [17.5, 17.9], "none": [15.0, 15.0]})
+    mic = _results({"coverage": [22.0, 22.0], "random": [22.5, 22.1], "pop_gs": [22.6, 22.4]})
+    for scene, data in (("lego", lego), ("mic", mic)):
+        (tmp_path / f"{scene}.json").write_text(json.dumps(data))
+    r = run_cli(str(ROOT / "scripts" / "compare_recommend_then_train.py"), f"lego={tmp_path / 'lego.json'}",
+                f"mic={tmp_path / 'mic.json'}")
+    assert r.returncode == 0, r.stderr
+    rows = {line.split(" | ")[0].strip("| "): line for line in r.stdout.splitlines()[2:]}
+    assert set(rows) == {"coverage", "random", "pop_gs"}  # "none" is not compared
+    # pop_gs: lego 17.70 - 18.00 (random) / - 18.10 (coverage); mic 22.50 - 22.30 / - 22.00; last in lego seed 1
+    assert rows["pop_gs"] == "| pop_gs | -0.30 / -0.40 | +0.20 / +0.50 | -0.30 | -0.40 | 1 of 4 |"
+    assert rows["coverage"] == "| coverage | +0.10 / +0.00 | -0.30 / +0.00 | -0.30 | +0.00 | 2 of 4 |"  # mic: both
+    assert rows["random"].endswith("| +0.00 | -0.10 | 1 of 4 |")  # last in lego seed 0
+    bad = run_cli(str(ROOT / "scripts" / "compare_recommend_then_train.py"), "lego")
+    assert bad.returncode == 2 and bad.stderr.strip().splitlines()[-1].startswith("error: each argument is SCENE=PATH")

@@ -7,21 +7,12 @@ Counts: exhaustive greedy, conservative = evaluated = sum_{j < min(K, M)} (M - j
 """
 from __future__ import annotations
 
-from active.base import Selection, SelectionContext, Selector, check_k
-from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
-from active.selectors.pop_gs import exhaustive_greedy
+from active.selectors.pop_gs import ExhaustiveGreedySelector
 
 
 @register_selector("cover")
-class CoverSelector(Selector):
+class CoverSelector(ExhaustiveGreedySelector):
     """Greedy on COVER's score; ties to the lowest id."""
 
     oracle_kind = "coverage"
-
-    def conservative_count(self, m: int, k: int) -> int:
-        return exhaustive_count(m, k)
-
-    def select(self, ctx: SelectionContext, k: int) -> Selection:
-        check_k(k)
-        return exhaustive_greedy(ctx.candidate_ids, k, ctx.oracle)

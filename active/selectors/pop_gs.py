@@ -3,10 +3,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from active.base import (GAIN_WEIGHT_HELP, GainOracle, LogDetSelector, Selection, SelectionContext, check_gain_weight,
-                         check_k)
+from active.base import (GAIN_WEIGHT_HELP, GainOracle, LogDetSelector, Selection, SelectionContext, Selector,
+                         check_gain_weight, check_k)
 from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
+
 
 def exhaustive_greedy(candidate_ids: list[int], k: int, oracle: GainOracle) -> Selection:
     """Plain greedy: M - j oracles at pick j, ties to the lowest id; each pick committed to `oracle`."""
@@ -24,6 +25,18 @@ def exhaustive_greedy(candidate_ids: list[int], k: int, oracle: GainOracle) -> S
         ids.append(best)
         gains.append(best_gain)
     return Selection(ids, gains, calls)
+
+
+class ExhaustiveGreedySelector(Selector):
+    """Plain greedy on the gains of the selector's `oracle_kind` (for selectors with no options: cover,
+    render_variance); counts: conservative = evaluated = sum_{j < min(K, M)} (M - j)."""
+
+    def conservative_count(self, m: int, k: int) -> int:
+        return exhaustive_count(m, k)
+
+    def select(self, ctx: SelectionContext, k: int) -> Selection:
+        check_k(k)
+        return exhaustive_greedy(ctx.candidate_ids, k, ctx.oracle)
 
 
 @dataclass(frozen=True)

@@ -11,21 +11,12 @@ sum_{j < min(K, M)} (M - j). Fisher passes: every candidate once for the target,
 """
 from __future__ import annotations
 
-from active.base import Selection, SelectionContext, Selector, check_k
-from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
-from active.selectors.pop_gs import exhaustive_greedy
+from active.selectors.pop_gs import ExhaustiveGreedySelector
 
 
 @register_selector("render_variance")
-class RenderVarianceSelector(Selector):
+class RenderVarianceSelector(ExhaustiveGreedySelector):
     """Greedy on the predicted rendering variance each candidate removes; ties to the lowest id."""
 
     oracle_kind = "render_variance"
-
-    def conservative_count(self, m: int, k: int) -> int:
-        return exhaustive_count(m, k)
-
-    def select(self, ctx: SelectionContext, k: int) -> Selection:
-        check_k(k)
-        return exhaustive_greedy(ctx.candidate_ids, k, ctx.oracle)

@@ -71,7 +71,8 @@ def summary_table(results: dict, methods: list[str], seeds: list[int]) -> str:
 def compare_table(results: dict[str, dict], methods: list[str] | None = None) -> str:
     """Across scenes (`results`: scene name -> a results.json's content): per method, its mean test PSNR minus
     random's and minus coverage's on each scene, the worst of each, and in how many scene-seeds it is last among
-    `methods` (default: the methods with every seed on every scene, "none" left out)."""
+    `methods` (ties count for each; default: the methods with every seed on every scene, "none" left out). Rows
+    from the best worst case against coverage down."""
     seeds = {name: sorted({int(k.rsplit("seed", 1)[1]) for k in r if "/seed" in k}) for name, r in results.items()}
     if methods is None:  # in the first scene's order
         per_scene = [list(dict.fromkeys(k.rsplit("/", 1)[0] for k in r if "/seed" in k)) for r in results.values()]
@@ -93,7 +94,8 @@ def compare_table(results: dict[str, dict], methods: list[str] | None = None) ->
     lines = ["| selector | " + " | ".join(head) + " | worst vs random | worst vs coverage | last in |",
              "|---|" + "---|" * (len(head) + 3)]
     total = sum(len(seeds[n]) for n in results)
-    for m in methods:
+    worst_vs_coverage = {m: min(mean[n, m] - mean[n, "coverage"] for n in results) for m in methods}
+    for m in sorted(methods, key=lambda m: -worst_vs_coverage[m]):  # best worst case first (stable on ties)
         d_random = [mean[n, m] - mean[n, "random"] for n in results]
         d_cover = [mean[n, m] - mean[n, "coverage"] for n in results]
         cells = [f"{a:+.2f} / {b:+.2f}" for a, b in zip(d_random, d_cover)]

@@ -13,7 +13,7 @@ def test_random_gets_no_note():
 
 
 def test_fisher_selectors_are_warned_only_from_few_views():
-    for name in ("pop_gs", "lite_gs", "lazy_pop"):
+    for name in ("pop_gs", "lite_gs", "lazy_pop", "render_variance", "novel_pop"):
         note = selection_advice(build_selector(name), 5)
-        assert note.startswith("note: 5 captured views") and "--method coverage" in note
+        assert note.startswith("note: 5 captured views") and "--method cover " in note
         assert selection_advice(build_selector(name), FEW_VIEWS + 1) is None

@@ -62,7 +62,8 @@ FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian f
     "default": ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
     "full_sh": ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest"),
 }
-ORACLE_KINDS = ("logdet", "logdet_opacity", "render_variance", "diagonal", "diagonal_reference", "coverage")  # build_oracle's kinds
+ORACLE_KINDS = ("logdet", "logdet_opacity", "render_variance", "diagonal", "diagonal_reference",
+                "coverage")  # build_oracle's kinds
 FACTOR_STORAGE = torch.float32  # dtype of cached view factors (the float32 accuracy test: tests/test_view_factors.py)
 
 
@@ -407,8 +408,7 @@ class FisherOracle(_ViewStatistics, BlockGainOracle):
         """Compute the prior from `train_views` and return an oracle over the other views of `cameras` (all of
         `fisher` applies); with `gain_weight="opacity"` each Gaussian's log-det term is weighted by its opacity
         (`active.base.GAIN_WEIGHTS`)."""
-        source = FisherViewBlocks(gaussians, cameras, background, settings, fisher)
-        prior = _prior(source, train_views, len(cameras))
+        source, prior = source_and_prior(gaussians, cameras, train_views, background, settings, fisher)
         weights = gaussians.opacities.detach() if gain_weight == "opacity" else None
         return cls(BlockInformation(prior, delta_rel=fisher.delta_rel, delta_abs=fisher.delta_abs), source, weights)
 
@@ -417,20 +417,28 @@ class FisherOracle(_ViewStatistics, BlockGainOracle):
                               background: torch.Tensor, settings: RasterSettings, *,
                               fisher: FisherSettings = FisherSettings()) -> "FisherOracle":
         """`build`'s oracle with gains = reductions of the predicted rendering variance over the candidate poses
-        (`active.variance_oracle`): the target T sums every candidate's blocks, one Fisher pass each before the
-        first gain (kept in the cache for the gains, as a cached stage keeps them anyway)."""
-        source = FisherViewBlocks(gaussians, cameras, background, settings, fisher)
-        prior = _prior(source, train_views, len(cameras))
-        taken = set(train_views)
-        candidates = [v for v in range(len(cameras)) if v not in taken]
-
-        def dense_view(v: int) -> torch.Tensor:
-            blocks = source(v)
-            return blocks.dense() if isinstance(blocks, ViewFactors) else blocks.double().clone()
-
-        target = summed_views(dense_view, candidates) if candidates else torch.zeros_like(prior)
+        (`active.variance_oracle`), the target summed by `candidate_target` before the first gain."""
+        source, prior = source_and_prior(gaussians, cameras, train_views, background, settings, fisher)
+        target = candidate_target(source, train_views) if set(range(len(cameras))) - set(train_views) else \
+            torch.zeros_like(prior)
         information = RenderVarianceInformation(prior, target, delta_rel=fisher.delta_rel, delta_abs=fisher.delta_abs)
         return cls(information, source)
+
+
+def source_and_prior(gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
+                     background: torch.Tensor, settings: RasterSettings,
+                     fisher: FisherSettings) -> tuple[FisherViewBlocks, torch.Tensor]:
+    """The view blocks of `cameras` (cached or streamed as `fisher` says) and the prior: the sum of the training
+    views' blocks. [N, P, P]"""
+    source = FisherViewBlocks(gaussians, cameras, background, settings, fisher)
+    return source, _prior(source, train_views, len(cameras))
+
+
+def candidate_target(source: FisherViewBlocks, train_views: list[int]) -> torch.Tensor:
+    """T = the sum of every candidate's blocks (the views of `source` not in `train_views`, at least one), one
+    Fisher pass each, kept in `source`'s cache for the gains as a cached stage keeps them anyway. [N, P, P] float64"""
+    taken = set(train_views)
+    return summed_views(lambda v: source(v).dense(), [v for v in range(len(source.cameras)) if v not in taken])
 
 
 class DiagonalGainOracle:

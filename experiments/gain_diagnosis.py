@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +17,9 @@ import numpy as np
 import torch
 
 from active.cover_oracle import CoverageOracle, frustum_directions, pixel_coordinates
-from active.fisher import FisherOracle
+from active.fisher import FisherOracle, candidate_target, source_and_prior
+from active.logdet import BlockInformation
+from active.variance_oracle import RenderVarianceInformation
 from arguments import FisherSettings
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
@@ -75,11 +76,15 @@ def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[in
              background: torch.Tensor, settings: Any, *, fisher: FisherSettings = FisherSettings(), top: int = 8,
              names: dict[int, str] | None = None) -> dict[str, Any]:
     """The breakdown of every candidate's first-pick log-det gain (and render-variance gain) over its Gaussians, the
-    spread of the gains, and the rank correlation with the opacity-weighted, render-variance and COVER gains. Returns a JSON-able dict; the per-Gaussian
-    gains of the top pick are under the private key "_top_terms" ([N] tensor)."""
-    oracle = FisherOracle.build(gaussians, cameras, train_ids, background, settings,
-                                fisher=replace(fisher, fisher_mode="streaming"))
-    variance = FisherOracle.build_render_variance(gaussians, cameras, train_ids, background, settings, fisher=fisher)
+    spread of the gains, and the rank correlation with the opacity-weighted, render-variance and COVER gains.
+    Returns a JSON-able dict; the per-Gaussian gains of the top pick are under the private key "_top_terms"
+    ([N] tensor)."""
+    source, prior_blocks = source_and_prior(gaussians, cameras, train_ids, background, settings, fisher)
+    ridge = {"delta_rel": fisher.delta_rel, "delta_abs": fisher.delta_abs}
+    # one source for both criteria: each candidate's Fisher pass is made once (cached by the variance's target)
+    variance = FisherOracle(RenderVarianceInformation(prior_blocks, candidate_target(source, train_ids), **ridge),
+                            source)
+    oracle = FisherOracle(BlockInformation(prior_blocks, **ridge), source)
     prior = oracle.information.prior_matrix  # H0 + ridge [N, P, P]
     diag_max = torch.diagonal(prior, dim1=-2, dim2=-1).amax(-1).cpu()
     prior_seen = diag_max > fisher.delta_abs * (1 + 1e-6) + 1e-300  # an all-zero prior block holds only the ridge

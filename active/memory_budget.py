@@ -14,10 +14,11 @@ n <= N visible Gaussians, taken as N; T threads):
 * "uncertainty" (`active.uncertainty.gaussian_uncertainty`: the position-variance map and recommend.py's previews):
   dense blocks of every Gaussian per training view (the sum, J^T G J and its sigma^-2 copy: 3 u, J^T G [N, P, 9]),
   then the same 5 u while the prior is factorised and inverted (`torch.cholesky_inverse`); no candidates.
-* "diagonal" (the diagonal oracles and FisherRF's maps): d = N P 8 B per [N, P] diagonal; a view's pass holds
-  J, G J and their product [n, 9, P] each, the diagonal and its sigma^-2 copy (2 d); the prior (d) stays while
-  candidates are scored, with the cache (d a view); the selector's four [N, P] temporaries come after a view's pass
-  is freed and stay below it.
+* "diagonal" (the diagonal oracles and FisherRF's maps): d = N P 8 B per [N, P] diagonal; a view's pass is the
+  larger of its render and Gram (`gram_pass_bytes`, freed before the next step) and J, G J and their product
+  [n, 9, P] with the Gram and the diagonal (d); the prior (d) stays while candidates are scored, with the cache
+  (d a view); the sigma^-2 copy and the selector's four [N, P] temporaries come after the [n, 9, P] arrays are freed
+  and stay below them.
 
 One view's pass (`fisher.fisher_view_factors`, compiled path) per visible Gaussian: the projection Jacobian
 [9, P] and the attribute Gram [9, 9] in float64, the Gram kernel's moment sums (34 float64, one row per thread plus
@@ -59,7 +60,8 @@ DENSE_PEAK_COPIES = 5  # [N, P, P] float64 copies alive while the prior is ridge
 DENSE_SUM_COPIES = 3  # ... while one training view is added to the prior
 DENSE_RESIDENT_COPIES = 2  # ... while the candidates are scored: A_0 and its Cholesky factor
 HEADROOM = 0.80  # a pass may take this share of the available memory; the rest covers the estimate's error:
-# estimate / measured peak resident memory 0.85-1.18 with every Gaussian seen (docs/performance.md)
+# estimate / measured peak of the live buffers 1.00-1.12 (docs/performance.md); the allocator's cached buffers
+# can raise a real process's resident peak above the live buffers' by up to ~15 %
 PASS_KINDS = ("logdet", "uncertainty", "diagonal")
 # oracle kind -> pass kind (None: no Fisher pass); render_variance holds one more [N, P, P] copy (its target) than
 # the log-det while scoring, inside HEADROOM's margin at the scale of the measurements
@@ -120,17 +122,23 @@ def view_pass_bytes(work: FisherWork, factor_bytes: int) -> int:
     """One view's pass over N visible Gaussians: Jacobian, Gram, moment sums, render inputs, packed factors of
     `factor_bytes` per entry (0: dense blocks instead), and the per-pixel buffers."""
     p = work.num_params
-    per_gaussian = (FLOAT64 * (ATTRIBUTES * p + ATTRIBUTES ** 2 + MOMENT_SUMS * (work.threads + 1))
-                    + RENDER_BYTES_PER_GAUSSIAN + packed_width(p, ATTRIBUTES) * factor_bytes)
+    per_gaussian = FLOAT64 * ATTRIBUTES * p + packed_width(p, ATTRIBUTES) * factor_bytes
+    return gram_pass_bytes(work) + work.num_gaussians * per_gaussian
+
+
+def gram_pass_bytes(work: FisherWork) -> int:
+    """The render and Gram of one view over N visible Gaussians: the Gram, moment sums, render inputs and the
+    per-pixel buffers (what `fisher._attribute_gram` holds at its peak)."""
+    per_gaussian = FLOAT64 * (ATTRIBUTES ** 2 + MOMENT_SUMS * (work.threads + 1)) + RENDER_BYTES_PER_GAUSSIAN
     return work.num_gaussians * per_gaussian + work.pixels * PIXEL_BYTES
 
 
 def estimate(work: FisherWork, cache_bytes: int = 0) -> FisherMemory:
     """The peak bytes of `work` with a cache budget of `cache_bytes` (module docstring: where each term comes from)."""
     n, p = work.num_gaussians, work.num_params
-    if work.kind == "diagonal":
+    if work.kind == "diagonal":  # the Gram's pass ends before J, G J and their product [n, 9, P] are formed
         diag = n * p * FLOAT64
-        view = view_pass_bytes(work, 0) + n * 2 * ATTRIBUTES * p * FLOAT64 + 2 * diag
+        view = max(gram_pass_bytes(work), n * (3 * ATTRIBUTES * p + ATTRIBUTES ** 2) * FLOAT64 + diag)
         cache = min(cache_bytes, work.num_candidates * diag)
         return FisherMemory(work, diag + view, diag, view, cache)
     dense = n * p * p * FLOAT64

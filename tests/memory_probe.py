@@ -4,10 +4,13 @@
 
 Each pass runs in this process after a warm-up on 500 Gaussians (numba kernels loaded), on a model whose Gaussians
 every view sees (small, faint splats: no pixel saturates), four 320 x 240 views (two for the prior, two
-candidates, cached). The peak is VmHWM after resetting it (/proc/self/clear_refs, 5) less VmRSS before the pass.
+candidates, cached). The peak is VmHWM after resetting it (/proc/self/clear_refs, 5) less VmRSS before the pass,
+with glibc's mmap threshold fixed (`fixed_mmap_threshold`) so that it is the peak of the live buffers.
 """
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import gc
 import json
 import math
@@ -63,6 +66,19 @@ def run_pass(kind: str, gaussians: GaussianModel, params: str) -> None:
     oracle.commit(2)
 
 
+def fixed_mmap_threshold(limit: int = 1 << 17) -> None:
+    """Serve every block above `limit` bytes by its own mmap and give it back at free (glibc `mallopt`).
+
+    glibc raises its mmap threshold after a large block is freed, after which freed large blocks stay in the heap
+    and a later pass reuses them without its resident size growing: the measured peak then depends on what ran
+    before (511-608 MB for the same diagonal pass). A fixed threshold turns that adaptation off.
+    """
+    libc = ctypes.CDLL(ctypes.util.find_library("c"))
+    m_trim_threshold, m_mmap_threshold = -1, -3
+    libc.mallopt(m_mmap_threshold, limit)
+    libc.mallopt(m_trim_threshold, limit)
+
+
 def status_bytes(field: str) -> int:
     """A /proc/self/status memory field (kB) in bytes."""
     with open("/proc/self/status") as fh:
@@ -87,6 +103,7 @@ def measure(kind: str, n: int, params: str) -> dict:
 
 if __name__ == "__main__":
     torch.set_num_threads(1)
+    fixed_mmap_threshold()
     for spec in sys.argv[1:]:
         kind, n, params = spec.split(":")
         print(json.dumps(measure(kind, int(n), params)), flush=True)

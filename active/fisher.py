@@ -47,6 +47,7 @@ import torch
 
 from active.cover_oracle import CoverageOracle
 from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite, gram_root_factors
+from active.probes import with_probes
 from active.variance_oracle import RenderVarianceInformation
 from arguments import FisherSettings
 from gaussian_renderer import (RasterSettings, attribute_gram, project_and_shade, projection_jacobian,
@@ -62,7 +63,7 @@ FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian f
     "default": ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
     "full_sh": ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest"),
 }
-ORACLE_KINDS = ("logdet", "logdet_opacity", "render_variance", "diagonal", "diagonal_reference",
+ORACLE_KINDS = ("logdet", "logdet_opacity", "logdet_probes", "render_variance", "diagonal", "diagonal_reference",
                 "coverage")  # build_oracle's kinds
 FACTOR_STORAGE = torch.float32  # dtype of cached view factors (the float32 accuracy test: tests/test_view_factors.py)
 
@@ -489,7 +490,8 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
                  background: torch.Tensor, settings: RasterSettings, *, fisher: FisherSettings = FisherSettings()
                  ) -> FisherOracle | DiagonalFisherOracle | CoverageOracle:
     """The oracle of `kind` (a selector's `oracle_kind`): "logdet" -> `FisherOracle` (ridge and `fisher_params`
-    apply), "logdet_opacity" -> the same with each Gaussian's term weighted by its opacity, "render_variance" -> the
+    apply), "logdet_opacity" -> the same with each Gaussian's term weighted by its opacity, "logdet_probes" -> the same over
+    the model and probe Gaussians in the space no training view observed (`active.probes`), "render_variance" -> the
     same blocks scored by the predicted rendering variance they remove over the candidate poses, "diagonal" ->
     `DiagonalFisherOracle` (every raw parameter group, no ridge), "diagonal_reference" -> the same over FisherRF's
     code's diagonal (`fisher_view_diagonals_reference`), "coverage" -> COVER's geometric `CoverageOracle` (no Fisher
@@ -497,6 +499,9 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
     if kind in ("logdet", "logdet_opacity"):
         return FisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher,
                                   gain_weight="opacity" if kind == "logdet_opacity" else "none")
+    if kind == "logdet_probes":
+        augmented, _ = with_probes(gaussians, cameras, train_views, settings)
+        return FisherOracle.build(augmented, cameras, train_views, background, settings, fisher=fisher)
     if kind == "render_variance":
         return FisherOracle.build_render_variance(gaussians, cameras, train_views, background, settings, fisher=fisher)
     if kind == "coverage":

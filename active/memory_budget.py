@@ -41,6 +41,7 @@ import torch
 from arguments import FisherSettings
 from active.fisher import (DIAGONAL_GROUPS, FISHER_PARAM_GROUPS, ORACLE_KINDS, available_memory_bytes, cache_budget,
                            parameter_columns)
+from active.probes import PROBE_COUNT
 from active.trapezoid import packed_width
 from gaussian_renderer.tiles import NUM_GEOMETRY_ATTRIBUTES
 from scene.cameras import Camera
@@ -65,8 +66,8 @@ HEADROOM = 0.80  # a pass may take this share of the available memory; the rest 
 PASS_KINDS = ("logdet", "uncertainty", "diagonal")
 # oracle kind -> pass kind (None: no Fisher pass); render_variance holds one more [N, P, P] copy (its target) than
 # the log-det while scoring, inside HEADROOM's margin at the scale of the measurements
-ORACLE_PASSES = {"logdet": "logdet", "logdet_opacity": "logdet", "render_variance": "logdet", "diagonal": "diagonal",
-                 "diagonal_reference": "diagonal", "coverage": None}
+ORACLE_PASSES = {"logdet": "logdet", "logdet_opacity": "logdet", "logdet_probes": "logdet", "render_variance": "logdet",
+                 "diagonal": "diagonal", "diagonal_reference": "diagonal", "coverage": None}
 NO_FISHER_PASS = "use a selector without a Fisher pass (--method cover, coverage or random)"  # the CLIs' fallback
 assert set(ORACLE_PASSES) == set(ORACLE_KINDS)
 
@@ -167,7 +168,8 @@ def selection_work(oracle_kind: str, gaussians: GaussianModel, pixels: int, num_
     if kind is None:
         return None
     groups = DIAGONAL_GROUPS[oracle_kind] if kind == "diagonal" else FISHER_PARAM_GROUPS[param_groups]
-    return FisherWork(kind, gaussians.num_gaussians if num_gaussians is None else num_gaussians,
+    extra = PROBE_COUNT if oracle_kind == "logdet_probes" else 0  # at most this many probes join the model
+    return FisherWork(kind, (gaussians.num_gaussians if num_gaussians is None else num_gaussians) + extra,
                       block_size(gaussians, groups), pixels, num_candidates, model_bytes=model_bytes)
 
 

@@ -39,6 +39,7 @@ def static_subset(m: int, k: int, eps: float) -> int:
 
 FORMULAS = {"pop_gs": lambda m, k, eps: exhaustive(m, k), "lazy_pop": lambda m, k, eps: exhaustive(m, k),
             "novel_pop": lambda m, k, eps: exhaustive(m, k), "render_variance": lambda m, k, eps: exhaustive(m, k),
+            "probe_pop": lambda m, k, eps: exhaustive(m, k),
             "lite_gs": stochastic, "ssg": static_subset,
             "random": lambda m, k, eps: 0, "fisherrf": lambda m, k, eps: exhaustive(m, k),
             "coverage": lambda m, k, eps: 0, "cover": lambda m, k, eps: exhaustive(m, k)}

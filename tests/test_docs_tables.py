@@ -150,3 +150,30 @@ def test_unrecorded_provenance_falls_back_to_the_data_commit(tmp_path):
     with pytest.raises(results_table.NoHistory):  # a folder outside any git checkout
         shutil.copytree(os.path.join(results_table.RESULTS_DIR, "setup1_lego"), tmp_path / "setup1_lego")
         results_table.data_commit(str(tmp_path / "setup1_lego"))
+
+
+def test_recommend_tables_match_committed_results():
+    from scripts import recommend_tables
+    with open(recommend_tables.DOC) as f:
+        doc = f.read()
+    blocks = recommend_tables.generated_blocks()
+    assert set(blocks) <= set(re.findall(r"<!-- generated: (\S+) -->", doc))
+    assert recommend_tables.splice(doc, blocks) == doc, (
+        "docs/recommend.md's recommend-then-train tables are stale: run `python scripts/recommend_tables.py --write`")
+
+
+def test_recommend_tables_change_when_a_result_changes(tmp_path):
+    """The comparison can fail: one changed test PSNR in a copy of the results changes its table and the comparison."""
+    import json
+    from scripts import recommend_tables
+    src = os.path.join(ROOT, "docs", "results")
+    for _, folder in recommend_tables.SCENES:
+        shutil.copytree(os.path.join(src, folder), tmp_path / folder)
+    path = tmp_path / "rtt_bonsai" / "results.json"
+    results = json.loads(path.read_text())
+    results["coverage/seed0"]["test_psnr"] = 12.5
+    path.write_text(json.dumps(results))
+    changed, committed = recommend_tables.generated_blocks(tmp_path), recommend_tables.generated_blocks()
+    assert changed["rtt_bonsai"] != committed["rtt_bonsai"] and "| coverage | 12.50 |" in changed["rtt_bonsai"]
+    assert changed["rtt_compare"] != committed["rtt_compare"]
+    assert changed["rtt_lego_official"] == committed["rtt_lego_official"]

@@ -1,0 +1,81 @@
+"""The recommend-then-train tables of docs/recommend.md, generated from the committed results.json files.
+
+    python scripts/recommend_tables.py            # exit 1 and name the stale tables if the docs differ
+    python scripts/recommend_tables.py --write    # rewrite them (and each folder's summary.md)
+
+Each scene's table (every method in its results.json, in the order they were run) and the cross-scene comparison
+(`experiments.recommend_train_loop.compare_table`) sit in docs/recommend.md between `<!-- generated: NAME -->` and
+`<!-- end generated -->` lines; tests/test_docs_tables.py checks that they are what this script writes.
+"""
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+
+from experiments.recommend_train_loop import compare_table, summary_table
+from utils.io import read_json
+
+ROOT = Path(__file__).resolve().parent.parent
+DOC = ROOT / "docs" / "recommend.md"
+SCENES = (("lego", "rtt_lego_official"), ("mic", "rtt_mic_official"), ("bonsai", "rtt_bonsai"))  # scene, folder
+COMPARE = "rtt_compare"
+BLOCK = re.compile(r"(<!-- generated: (\S+) -->\n)(.*?)(<!-- end generated -->)", re.S)
+
+
+BASELINES = ("coverage", "cover", "random")  # the first rows of every table, then the others in the order they ran
+
+
+def scene_summary(results: dict) -> str:
+    """summary_table over every method and seed of one results.json: the baselines first, then the other methods in
+    the order they were run."""
+    keys = [k for k in results if "/seed" in k]
+    run_order = list(dict.fromkeys(k.rsplit("/", 1)[0] for k in keys))
+    methods = [m for m in BASELINES if m in run_order] + [m for m in run_order if m not in BASELINES]
+    seeds = sorted({int(k.rsplit("seed", 1)[1]) for k in keys})
+    return summary_table(results, methods, seeds)
+
+
+def generated_blocks(results_dir: Path = ROOT / "docs" / "results") -> dict[str, str]:
+    """Block name -> its text: one per scene folder, and the comparison across the scenes."""
+    results = {scene: read_json(results_dir / folder / "results.json", what="recommend-then-train results",
+                                fix="run scripts/recommend_then_train.py") for scene, folder in SCENES}
+    blocks = {folder: scene_summary(results[scene]) for scene, folder in SCENES}
+    blocks[COMPARE] = compare_table(results)
+    return blocks
+
+
+def splice(doc: str, blocks: dict[str, str]) -> str:
+    """`doc` with each generated block's body replaced by `blocks[name]` (blocks absent from `blocks` kept)."""
+    return BLOCK.sub(lambda m: m.group(1) + blocks.get(m.group(2), m.group(3)) + m.group(4), doc)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--write", action="store_true", help="rewrite docs/recommend.md's tables and the summary.md files")
+    args = p.parse_args(argv)
+    blocks = generated_blocks()
+    doc = DOC.read_text()
+    names = {m.group(2) for m in BLOCK.finditer(doc)}
+    missing = sorted(set(blocks) - names)
+    if missing:
+        print(f"error: docs/recommend.md has no generated block for {', '.join(missing)}", file=sys.stderr)
+        return 1
+    new = splice(doc, blocks)
+    if args.write:
+        DOC.write_text(new)
+        for _, folder in SCENES:
+            (ROOT / "docs" / "results" / folder / "summary.md").write_text(blocks[folder])
+        print(f"wrote {DOC.relative_to(ROOT)} and {len(SCENES)} summary.md files")
+        return 0
+    if new != doc:
+        print("docs/recommend.md's recommend-then-train tables are stale: run python scripts/recommend_tables.py "
+              "--write", file=sys.stderr)
+        return 1
+    print("docs/recommend.md's recommend-then-train tables match the committed results")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

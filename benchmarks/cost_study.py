@@ -269,6 +269,35 @@ def sources(args: argparse.Namespace) -> list[tuple[dict, str]]:
     return out
 
 
+def selector_setting(text: str) -> tuple[str, float | None]:
+    """"NAME" or "NAME:EPS" (lite_gs, ssg) as a preset's (selector, eps) setting."""
+    name, _, eps = text.partition(":")
+    known = {s for preset in PRESETS.values() for s, _ in preset.settings}
+    if name not in known:
+        raise UserError(f"--selectors: unknown selector {name!r}; the study runs {', '.join(sorted(known))}")
+    if (name in EXACT) == bool(eps):
+        raise UserError(f"--selectors {text}: " + ("pop_gs and lazy_pop take no eps" if eps else
+                                                   f"{name} needs an eps, e.g. {name}:0.1"))
+    try:
+        value = float(eps) if eps else None
+    except ValueError:
+        raise UserError(f"--selectors {text}: eps must be a number in (0, 1)") from None
+    if value is not None and not 0.0 < value < 1.0:
+        raise UserError(f"--selectors {text}: eps must lie in (0, 1)")
+    return name, value
+
+
+def narrowed(preset: Preset, selectors: list[str] | None, caches: list[str] | None) -> Preset:
+    """`preset` with only the given selector settings and caches (None: all of the preset's)."""
+    if selectors:
+        preset = replace(preset, settings=tuple(selector_setting(text) for text in selectors))
+    if caches:
+        if "unlimited" not in caches:  # the quarter budgets are sized by the unlimited run
+            raise UserError("--caches: the quarter budgets are a quarter of the unlimited run's pool; include unlimited")
+        preset = replace(preset, caches=tuple(c for c in CACHES if c in caches))
+    return preset
+
+
 def plan(args: argparse.Namespace, preset: Preset, ms: list[int], ks: list[int]) -> list[tuple[dict, str, list[int]]]:
     """(child spec without its cache budget, model name, the Ks its rows report) of every configuration, in run
     order: per model and M the unlimited cache first (pop_gs first: it sizes the quarter budget)."""
@@ -288,7 +317,7 @@ def plan(args: argparse.Namespace, preset: Preset, ms: list[int], ks: list[int])
 
 def study(args: argparse.Namespace) -> Path:
     """Run the grid, one child process per configuration; returns the JSON written."""
-    preset = PRESETS[args.preset]
+    preset = narrowed(PRESETS[args.preset], args.selectors, args.caches)
     ms, ks = sorted(args.ms or preset.ms), sorted(args.ks or preset.ks)
     if max(ks) > min(ms):
         raise UserError(f"K = {max(ks)} exceeds the smallest pool M = {min(ms)}")
@@ -572,6 +601,9 @@ def main() -> None:
     parser.add_argument("--garden", nargs="+", help="garden SfM initialisation at these WxH sizes (648x420 ...)")
     parser.add_argument("--ms", type=int, nargs="+", help="pool sizes M (default: the preset's)")
     parser.add_argument("--ks", type=int, nargs="+", help="K values (default: the preset's)")
+    parser.add_argument("--selectors", nargs="+", help="only these settings, NAME or NAME:EPS (default: the "
+                                                        "preset's), e.g. lazy_pop lite_gs:0.1")
+    parser.add_argument("--caches", nargs="+", choices=tuple(CACHES), help="only these caches (default: all three)")
     parser.add_argument("--candidates", choices=("hemisphere", "orbit"), default="hemisphere",
                         help="generated poses around the prior's views (recommender.candidates)")
     parser.add_argument("--threads", type=int, default=2)

@@ -85,3 +85,19 @@ def test_without_a_model_one_error_line():
     r = run_cli("benchmarks/cost_study.py", "--preset", "smoke")
     assert r.returncode == 2 and r.stderr.strip().splitlines() == [
         "error: give at least one model: --model DIR (a train.py model directory) or --garden WxH"]
+
+
+def test_selectors_and_caches_narrow_the_preset_and_bad_values_get_one_line():
+    from benchmarks.cost_study import PRESETS, narrowed, selector_setting
+    from utils.errors import UserError
+    full = PRESETS["full"]
+    small = narrowed(full, ["lazy_pop", "lite_gs:0.3"], ["unlimited"])
+    assert small.settings == (("lazy_pop", None), ("lite_gs", 0.3)) and small.caches == ("unlimited",)
+    assert small.ms == full.ms and narrowed(full, None, None) == full
+    assert narrowed(full, None, ["quarter_lru", "unlimited"]).caches == ("unlimited", "quarter_lru")  # run order
+    for bad, message in (("greedy", "unknown selector 'greedy'"), ("pop_gs:0.1", "take no eps"),
+                         ("lite_gs", "needs an eps"), ("lite_gs:x", "must be a number"), ("ssg:1.5", "in \\(0, 1\\)")):
+        with pytest.raises(UserError, match=message):
+            selector_setting(bad)
+    with pytest.raises(UserError, match="include unlimited"):
+        narrowed(full, None, ["quarter"])

@@ -9,7 +9,7 @@ coverage on lego, level on mic, 0.29 above on bonsai. In the capture loop (candi
 coverage and cover led, random was 1.9 dB behind and pop_gs 7.7 dB.
 No statistic of the model is known that tells the Fisher's good cases apart, so the line states the evidence rather
 than a rule. With models trained on the paper's stage lengths (Setup 1, docs/results.md) the Fisher selectors led
-on lego, mic and bonsai.
+on lego and mic, and cover on bonsai (2026-12-06: 21.04 dB against pop_gs's 20.60 and coverage's 19.58, every seed).
 """
 from __future__ import annotations
 

@@ -137,8 +137,9 @@ def plot(root: Path, png: Path) -> None:
 def run_capture_loop(args: argparse.Namespace) -> None:
     """scripts/capture_loop.py's parsed flags (`args`): only the plot of `args.plot`'s folder, or every (method, seed)
     loop into `args.output`, then the plot (`args.png`, default: psnr_vs_views.png in that folder)."""
+    png = Path(args.png) if args.png else Path(args.plot or args.output) / "psnr_vs_views.png"
     if args.plot:
-        plot(Path(args.plot), Path(args.png or Path(args.plot) / "psnr_vs_views.png"))
+        plot(Path(args.plot), png)
         return
     root = Path(args.output)
     for method in args.methods:
@@ -146,5 +147,5 @@ def run_capture_loop(args: argparse.Namespace) -> None:
             run_loop(method, seed, root / method / f"seed{seed}", args)
     (root / "summary.md").write_text(summary_table(root))
     print((root / "summary.md").read_text())
-    plot(root, Path(args.png or root / "psnr_vs_views.png"))
+    plot(root, png)
 

@@ -68,14 +68,21 @@ def summary_table(results: dict, methods: list[str], seeds: list[int]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def recorded_runs(results: dict) -> tuple[list[str], list[int]]:
+    """The methods (in the order they were run) and the seeds of a results.json's "METHOD/seedS" entries."""
+    keys = [k for k in results if "/seed" in k]
+    return list(dict.fromkeys(k.rsplit("/", 1)[0] for k in keys)), sorted({int(k.rsplit("seed", 1)[1]) for k in keys})
+
+
 def compare_table(results: dict[str, dict], methods: list[str] | None = None) -> str:
     """Across scenes (`results`: scene name -> a results.json's content): per method, its mean test PSNR minus
     random's and minus coverage's on each scene, the worst of each, and in how many scene-seeds it is last among
     `methods` (ties count for each; default: the methods with every seed on every scene, "none" left out). Rows
     from the best worst case against coverage down."""
-    seeds = {name: sorted({int(k.rsplit("seed", 1)[1]) for k in r if "/seed" in k}) for name, r in results.items()}
+    recorded = {name: recorded_runs(r) for name, r in results.items()}
+    seeds = {name: runs[1] for name, runs in recorded.items()}
     if methods is None:  # in the first scene's order
-        per_scene = [list(dict.fromkeys(k.rsplit("/", 1)[0] for k in r if "/seed" in k)) for r in results.values()]
+        per_scene = [runs[0] for runs in recorded.values()]
         methods = [m for m in per_scene[0] if m != "none" and all(m in found for found in per_scene)
                    and all(f"{m}/seed{x}" in results[n] for n in results for x in seeds[n])]
     for required in ("random", "coverage"):

@@ -14,7 +14,7 @@ import re
 import sys
 from pathlib import Path
 
-from experiments.recommend_train_loop import compare_table, summary_table
+from experiments.recommend_train_loop import compare_table, recorded_runs, summary_table
 from utils.io import read_json
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -22,18 +22,14 @@ DOC = ROOT / "docs" / "recommend.md"
 SCENES = (("lego", "rtt_lego_official"), ("mic", "rtt_mic_official"), ("bonsai", "rtt_bonsai"))  # scene, folder
 COMPARE = "rtt_compare"
 BLOCK = re.compile(r"(<!-- generated: (\S+) -->\n)(.*?)(<!-- end generated -->)", re.S)
-
-
 BASELINES = ("coverage", "cover", "random")  # the first rows of every table, then the others in the order they ran
 
 
 def scene_summary(results: dict) -> str:
     """summary_table over every method and seed of one results.json: the baselines first, then the other methods in
     the order they were run."""
-    keys = [k for k in results if "/seed" in k]
-    run_order = list(dict.fromkeys(k.rsplit("/", 1)[0] for k in keys))
+    run_order, seeds = recorded_runs(results)
     methods = [m for m in BASELINES if m in run_order] + [m for m in run_order if m not in BASELINES]
-    seeds = sorted({int(k.rsplit("seed", 1)[1]) for k in keys})
     return summary_table(results, methods, seeds)
 
 

@@ -46,6 +46,7 @@ from typing import Callable
 import torch
 
 from active.cover_oracle import CoverageOracle
+from active.gated_oracle import CoverGatedOracle
 from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite, gram_root_factors
 from active.probes import with_probes
 from active.variance_oracle import RenderVarianceInformation
@@ -63,8 +64,8 @@ FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian f
     "default": ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
     "full_sh": ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest"),
 }
-ORACLE_KINDS = ("logdet", "logdet_opacity", "logdet_probes", "render_variance", "diagonal", "diagonal_reference",
-                "coverage")  # build_oracle's kinds
+ORACLE_KINDS = ("logdet", "logdet_opacity", "logdet_probes", "logdet_cover", "render_variance", "diagonal",
+                "diagonal_reference", "coverage")  # build_oracle's kinds
 FACTOR_STORAGE = torch.float32  # dtype of cached view factors (the float32 accuracy test: tests/test_view_factors.py)
 
 
@@ -491,7 +492,8 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
                  ) -> FisherOracle | DiagonalFisherOracle | CoverageOracle:
     """The oracle of `kind` (a selector's `oracle_kind`): "logdet" -> `FisherOracle` (ridge and `fisher_params`
     apply), "logdet_opacity" -> the same with each Gaussian's term weighted by its opacity, "logdet_probes" -> the same over
-    the model and probe Gaussians in the space no training view observed (`active.probes`), "render_variance" -> the
+    the model and probe Gaussians in the space no training view observed (`active.probes`), "logdet_cover" -> the log-det
+    oracle with COVER's score beside it (`active.gated_oracle.CoverGatedOracle`), "render_variance" -> the
     same blocks scored by the predicted rendering variance they remove over the candidate poses, "diagonal" ->
     `DiagonalFisherOracle` (every raw parameter group, no ridge), "diagonal_reference" -> the same over FisherRF's
     code's diagonal (`fisher_view_diagonals_reference`), "coverage" -> COVER's geometric `CoverageOracle` (no Fisher
@@ -502,6 +504,9 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
     if kind == "logdet_probes":
         augmented, _ = with_probes(gaussians, cameras, train_views, settings)
         return FisherOracle.build(augmented, cameras, train_views, background, settings, fisher=fisher)
+    if kind == "logdet_cover":
+        return CoverGatedOracle(FisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher),
+                                CoverageOracle(gaussians.means, gaussians.opacities, cameras, train_views))
     if kind == "render_variance":
         return FisherOracle.build_render_variance(gaussians, cameras, train_views, background, settings, fisher=fisher)
     if kind == "coverage":

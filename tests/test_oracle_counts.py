@@ -9,6 +9,7 @@ import torch
 from active import build_selector, list_selectors
 from active.base import SelectionContext
 from active.fisher import DiagonalGainOracle
+from active.gated_oracle import CoverGatedOracle
 from active.logdet import BlockGainOracle, BlockInformation
 from active.oracle_counts import exhaustive_count, mean_rounded_up, schedule_counts
 from tests.test_logdet import random_blocks
@@ -39,7 +40,7 @@ def static_subset(m: int, k: int, eps: float) -> int:
 
 FORMULAS = {"pop_gs": lambda m, k, eps: exhaustive(m, k), "lazy_pop": lambda m, k, eps: exhaustive(m, k),
             "novel_pop": lambda m, k, eps: exhaustive(m, k), "render_variance": lambda m, k, eps: exhaustive(m, k),
-            "probe_pop": lambda m, k, eps: exhaustive(m, k),
+            "probe_pop": lambda m, k, eps: exhaustive(m, k), "cover_pop": lambda m, k, eps: exhaustive(m, k),
             "lite_gs": stochastic, "ssg": static_subset,
             "random": lambda m, k, eps: 0, "fisherrf": lambda m, k, eps: exhaustive(m, k),
             "coverage": lambda m, k, eps: 0, "cover": lambda m, k, eps: exhaustive(m, k)}
@@ -123,6 +124,9 @@ def test_selector_reports_the_formula_and_the_oracle_counts_evaluations(method, 
     else:
         oracle = BlockGainOracle(BlockInformation(blocks[0]), lambda v: blocks[v + 1])
         sel_object = selector(method, eps)
+    if sel_object.oracle_kind == "logdet_cover":  # the gate: another log-det oracle stands in for COVER's
+        gate_blocks = random_blocks(m + 1, 3, 2, seed=k + 100)
+        oracle = CoverGatedOracle(oracle, BlockGainOracle(BlockInformation(gate_blocks[0]), lambda v: gate_blocks[v + 1]))
     centers = torch.randn(m, 3, generator=torch.Generator().manual_seed(k))
     ctx = SelectionContext(list(range(m)), oracle, torch.Generator().manual_seed(0), 0, camera_centers=centers)
     sel = sel_object.select(ctx, k)

@@ -24,6 +24,9 @@ its counts so far (status "timeout" / "memory").
 Writes benchmarks/results/cost_study_DATE.json (rewritten after every configuration) and beside it the report: a
 markdown file (.md: the targets of issue 42, the regime where lite_gs's wall time is <= 0.5x the faster exact
 method, the lite_gs / exact ratios and every row) and a plot (.png). `--report JSON` rebuilds both from a saved JSON.
+`--resume --json JSON` continues an interrupted or partial study (the full preset takes 15-16 h on 2 cores: run it in
+pieces): the configurations whose rows JSON holds are kept, the others run and are added; each row carries its own
+date, machine and code commit.
 """
 from __future__ import annotations
 
@@ -315,6 +318,24 @@ def plan(args: argparse.Namespace, preset: Preset, ms: list[int], ks: list[int])
     return out
 
 
+def earlier_results(path: Path, timeout_s: float) -> tuple[list[dict], dict[str, int]]:
+    """The rows and pool sizes of an earlier run's JSON, for --resume (same per-configuration limit required)."""
+    if not path.is_file():
+        raise UserError(f"--resume: {path} not found; give the --json of the run to continue")
+    doc = json.loads(path.read_text())
+    if doc.get("timeout_s") != timeout_s:
+        raise UserError(f"--resume: {path} ran with --timeout_s {doc.get('timeout_s')}, not {timeout_s}; give the same")
+    return doc["rows"], doc.get("pool_bytes", {})
+
+
+def has_rows(rows: list[dict], spec: dict, name: str, ks: list[int]) -> bool:
+    """Whether `rows` hold the rows of this configuration for every K in `ks` (whatever their status)."""
+    setting = label(spec["selector"], spec["eps"])
+    done = {r["K"] for r in rows if (r["model"], r["M"], r["setting"], r["cache"]) == (name, spec["M"], setting,
+                                                                                       spec["cache"])}
+    return set(ks) <= done
+
+
 def study(args: argparse.Namespace) -> Path:
     """Run the grid, one child process per configuration; returns the JSON written."""
     preset = narrowed(PRESETS[args.preset], args.selectors, args.caches)
@@ -326,13 +347,18 @@ def study(args: argparse.Namespace) -> Path:
     env = environment_record(device="cpu")
     out = args.json or RESULTS_DIR / f"cost_study_{time.strftime('%Y%m%d_%H%M%S')}.json"
     doc = {"environment": env, "preset": args.preset, "command": " ".join(sys.argv), "ms": ms, "ks": ks,
-           "timeout_s": args.timeout_s, "rows": []}
-    sizes: dict[tuple[str, int], int] = {}  # (model, M) -> the pool's cached bytes
+           "timeout_s": args.timeout_s, "rows": [], "pool_bytes": {}}
+    if args.resume:
+        doc["rows"], doc["pool_bytes"] = earlier_results(out, args.timeout_s)
+    sizes = doc["pool_bytes"]  # "source|M" -> the pool's cached bytes in the unlimited run
     print(f"{len(configs)} configurations, one process each, one after the other -> {out}", flush=True)
     for i, (spec, name, row_ks) in enumerate(configs, 1):
-        key = (json.dumps(spec["source"]), spec["M"])
+        key = f"{json.dumps(spec['source'])}|{spec['M']}"
         tag = f"[{i}/{len(configs)}] {name} M={spec['M']} {label(spec['selector'], spec['eps'])} " \
               f"K={spec['k_run']} {spec['cache']}"
+        if has_rows(doc["rows"], spec, name, row_ks):
+            print(f"{tag}: kept from {out.name}", flush=True)
+            continue
         if spec["cache"] != "unlimited":
             if key not in sizes:
                 print(f"{tag}: skipped (no unlimited-cache run sized the pool)", flush=True)
@@ -611,6 +637,8 @@ def main() -> None:
     parser.add_argument("--timeout_s", type=float, default=None, help="per configuration (default: the preset's)")
     parser.add_argument("--reserve_mb", type=int, default=1024, help="stop a configuration with less memory left")
     parser.add_argument("--json", type=Path, default=None, help="results (default benchmarks/results/...)")
+    parser.add_argument("--resume", action="store_true", help="continue the --json of an earlier run: keep its "
+                                                               "rows, run only the configurations it lacks")
     parser.add_argument("--report", type=Path, default=None, help="only rebuild the report of a results JSON")
     parser.add_argument("--out_dir", type=Path, default=None, help="where --report writes (default: beside JSON)")
     parser.add_argument("--run_config", default=None, help=argparse.SUPPRESS)  # a child: one configuration

@@ -101,3 +101,25 @@ def test_selectors_and_caches_narrow_the_preset_and_bad_values_get_one_line():
             selector_setting(bad)
     with pytest.raises(UserError, match="include unlimited"):
         narrowed(full, None, ["quarter"])
+
+
+def test_resume_runs_only_the_configurations_the_json_lacks(study, tmp_path):
+    model, out, rows = study
+    partial = tmp_path / "partial.json"
+    doc = json.loads(out.read_text())
+    dropped = ("lite_gs eps=0.3", "quarter")
+    doc["rows"] = [r for r in rows if (r["setting"], r["cache"]) != dropped]
+    partial.write_text(json.dumps(doc))
+    r = run_cli("benchmarks/cost_study.py", "--preset", "smoke", "--model", str(model), "--threads", "1", "--json",
+                str(partial), "--resume", timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    ran = [line for line in r.stdout.splitlines() if line.startswith("[") and "kept from" not in line]
+    assert len(ran) == 2 and all("lite_gs eps=0.3" in line and " quarter:" in line for line in ran), ran
+    resumed = json.loads(partial.read_text())["rows"]
+    key = lambda row: (row["setting"], row["cache"], row["K"])  # noqa: E731
+    assert sorted(map(key, resumed)) == sorted(map(key, rows))
+    kept = {key(row): row for row in resumed if (row["setting"], row["cache"]) != dropped}
+    assert all(kept[key(row)] == row for row in rows if (row["setting"], row["cache"]) != dropped)
+    r = run_cli("benchmarks/cost_study.py", "--preset", "smoke", "--model", str(model), "--json", str(partial),
+                "--resume", "--timeout_s", "5")
+    assert r.returncode == 2 and r.stderr.strip().splitlines()[-1].startswith("error: --resume:")

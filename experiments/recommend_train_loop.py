@@ -116,6 +116,10 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
     method and seed recommend.py and the continued training; writes OUT/results.json and OUT/summary.md, reusing the
     finished steps."""
     data, out = Path(args.data), Path(args.output)
+    select_at = args.select_iteration or args.base_iterations
+    if not 0 < select_at <= args.base_iterations:
+        raise UserError(f"--select_iteration must lie in [1, --base_iterations = {args.base_iterations}], got "
+                        f"{select_at}")
     seed_data = make_seed_dataset(data, out, args.num_seed_views, images=args.images,
                                   seed_points=args.seed_points)  # a bad --data: nothing written
     (out / "logs").mkdir(parents=True, exist_ok=True)
@@ -126,11 +130,15 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
     base = out / "base"
     if not RunDirectory(base).is_complete():
         secs = run(["train.py", "-s", str(seed_data.folder), "-m", str(base), "--iterations",
-                    str(args.base_iterations), "--overwrite", *seed_data.seed_flags, *common], args.threads,
+                    str(args.base_iterations), "--save_iterations", str(select_at), "--overwrite",
+                    *seed_data.seed_flags, *common], args.threads,
                    out / "logs" / "base.log")
         print(f"base model on {len(seeds)} views: {secs:.0f} s")
     base_status = read_json(base / model_dir.RUN_STATUS)
     base_ply = model_dir.point_cloud_ply(base, args.base_iterations)
+    if not model_dir.point_cloud_ply(base, select_at).is_file():
+        raise UserError(f"{base} has no point cloud at iteration {select_at} (--select_iteration); use a new -o to "
+                        "train a base model that saves it")
     results_path = out / "results.json"
     results = read_json(results_path, missing="none", fix="delete it to run every step again") or {}
     results["settings"] = {**vars(args), "seed_views": seeds, "candidates": len(candidates),
@@ -143,7 +151,8 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
             if method != "none" and "picks" not in row:
                 rec_dir = out / "recommend" / f"{method}_seed{seed}"
                 secs = run(["recommend.py", "-m", str(base), "--candidates", str(seed_data.candidate_poses),
-                            "-k", str(args.k), *method_args(method), "--seed", str(seed), "-o", str(rec_dir),
+                            "-k", str(args.k), *method_args(method), "--seed", str(seed), "--iteration",
+                            str(select_at), "-o", str(rec_dir),
                             "--quiet", "--no_previews"], args.threads, out / "logs" / f"recommend_{method}_{seed}.log")
                 rec = read_json(rec_dir / "recommendations.json")
                 row = {"picks": [candidates[pick["candidate"]] for pick in rec["picks"]],

@@ -40,6 +40,10 @@ def main() -> None:
     p.add_argument("-r", "--resolution", default="8")
     p.add_argument("--base_iterations", type=int, default=1000, help="training of the seed-view model")
     p.add_argument("--iterations", type=int, default=1200, help="training continued on the seed + K views")
+    p.add_argument("--select_iteration", type=int, default=None,
+                   help="recommend on the seed-view model as saved at this iteration (< --base_iterations; a "
+                        "diagnosis: picks of a less trained model), the training still continuing from the last "
+                        "(default: the last)")
     p.add_argument("--train_args", default="--num_random_points 3000 --densify_from_iter 100 "
                                             "--densification_interval 50 --max_gaussians 20000",
                    help="extra train.py flags of both trainings, one string (--train_args=\"...\"; default: 3,000 "

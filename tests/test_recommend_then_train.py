@@ -93,6 +93,23 @@ def test_end_to_end_on_the_tiny_scene(tiny_scene, tmp_path):
     assert "| coverage |" in (out / "summary.md").read_text()
 
 
+@pytest.mark.slow
+def test_select_iteration_recommends_on_the_earlier_model_and_continues_from_the_last(tiny_scene, tmp_path):
+    out = tmp_path / "rtt"
+    flags = ["--data", str(tiny_scene), "-o", str(out), "--methods", "cover", "--seeds", "0", "--num_seed_views", "3",
+             "-k", "2", "-r", "32", "--base_iterations", "30", "--iterations", "20",
+             "--train_args=--num_random_points 300 --densify_from_iter 10", "--threads", "1"]
+    r = run_cli(str(SCRIPT), *flags, "--select_iteration", "10", timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    rec = json.loads((out / "recommend" / "cover_seed0" / "recommendations.json").read_text())
+    assert rec["iteration"] == 10
+    cfg = json.loads((out / "continue" / "cover_seed0" / "cfg_args").read_text())
+    assert cfg["model"]["init_ply"].endswith("iteration_30/point_cloud.ply")
+    r = run_cli(str(SCRIPT), *flags, "--select_iteration", "31")
+    assert r.returncode == 2 and r.stderr.strip().splitlines() == [
+        "error: --select_iteration must lie in [1, --base_iterations = 30], got 31"]
+
+
 def _results(values: dict[str, list[float]]) -> dict:
     return {"settings": {}, **{f"{m}/seed{s}": {"test_psnr": v} for m, vs in values.items() for s, v in enumerate(vs)}}
 

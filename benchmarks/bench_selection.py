@@ -38,6 +38,8 @@ import torch
 from active import SelectionContext, build_selector, list_selectors, selector_options
 from active.fisher import (FACTOR_STORAGE, DiagonalGainOracle, fisher_view_blocks, fisher_view_diagonals,
                            fisher_view_factors, parameter_columns)
+from active.cover_oracle import CoverageOracle
+from active.gated_oracle import CoverGatedOracle
 from active.logdet import BlockGainOracle, BlockInformation, DenseBlockInformation
 from active.schedule import farthest_point_views
 from gaussian_renderer import render
@@ -204,6 +206,9 @@ def main() -> None:
                     oracle = DenseGainOracle(DenseBlockInformation(prior), provider)
                 else:
                     oracle = BlockGainOracle(BlockInformation(prior), provider)
+                if kind == "logdet_cover":  # cover_pop: the log-det oracle gated by COVER's score
+                    oracle = CoverGatedOracle(oracle, CoverageOracle(gaussians.means, gaussians.opacities, cams,
+                                                                     list(seeds)))
                 ctx = SelectionContext(candidates, oracle, torch.Generator().manual_seed(0), 0,
                                        camera_centers=torch.stack([c.camera_center for c in cams]),
                                        train_ids=tuple(seeds))

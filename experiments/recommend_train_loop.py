@@ -116,7 +116,7 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
     method and seed recommend.py and the continued training; writes OUT/results.json and OUT/summary.md, reusing the
     finished steps."""
     data, out = Path(args.data), Path(args.output)
-    select_at = args.select_iteration or args.base_iterations
+    select_at = args.base_iterations if args.select_iteration is None else args.select_iteration
     if not 0 < select_at <= args.base_iterations:
         raise UserError(f"--select_iteration must lie in [1, --base_iterations = {args.base_iterations}], got "
                         f"{select_at}")

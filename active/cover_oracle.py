@@ -24,6 +24,7 @@ from __future__ import annotations
 import torch
 
 from scene.cameras import Camera
+from scene.gaussian_model import GaussianModel
 
 
 def pixel_coordinates(means: torch.Tensor, camera: Camera) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -80,6 +81,11 @@ class CoverageOracle:
         self._committed: list[tuple[torch.Tensor, torch.Tensor]] = []  # (inside [N], directions [N, 3])
         for view in train_views:
             self._committed.append(frustum_directions(self.means, cameras[view]))
+
+    @classmethod
+    def for_model(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int]) -> CoverageOracle:
+        """COVER's oracle over a model's Gaussians: their centres, weighted by their opacities."""
+        return cls(gaussians.means, gaussians.opacities, cameras, train_views)
 
     def novelty(self, view_id: int) -> tuple[torch.Tensor, torch.Tensor]:
         """Per Gaussian: in the view's frustum, and how new its direction is, min over S of (1 - cos) / 2 (1 where

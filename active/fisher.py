@@ -506,11 +506,11 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
         return FisherOracle.build(augmented, cameras, train_views, background, settings, fisher=fisher)
     if kind == "logdet_cover":
         return CoverGatedOracle(FisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher),
-                                CoverageOracle(gaussians.means, gaussians.opacities, cameras, train_views))
+                                CoverageOracle.for_model(gaussians, cameras, train_views))
     if kind == "render_variance":
         return FisherOracle.build_render_variance(gaussians, cameras, train_views, background, settings, fisher=fisher)
     if kind == "coverage":
-        return CoverageOracle(gaussians.means, gaussians.opacities, cameras, train_views)
+        return CoverageOracle.for_model(gaussians, cameras, train_views)
     if kind in ("diagonal", "diagonal_reference"):
         return DiagonalFisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher,
                                           reference=kind == "diagonal_reference")

@@ -13,8 +13,11 @@ farthest-point sampling (2 of the pool, so M = 98 candidates on the built-in sce
 Every selector that calls the oracle runs (or those of --methods), once per combination of the --sweep values of the
 options it declares (default eps = 0.1 0.3 0.6); ratios are taken to the row with the most evaluated oracles at the
 same K (exhaustive greedy when it runs). Peak resident memory of the process is printed at the end.
-Each selector gets the oracle its `oracle_kind` declares (log-det: sparse view factors, `active.logdet`; diagonal:
-the blocks' diagonals). `--compare_dense` also runs every log-det selector on the dense twin (`DenseBlockInformation`
+Each selector gets the oracle its `oracle_kind` declares. The log-det, COVER-gated log-det and diagonal kinds share
+this script's view factors (sparse, `active.logdet`) or diagonals, so the cache build is timed apart; every other kind
+(cover's geometric score, render_variance, probe_pop's probes, the opacity weighting, FisherRF's reference diagonal)
+gets its own oracle from `active.fisher.build_oracle`, marked `own` in the oracle column, and its select time
+includes its Fisher passes. `--compare_dense` also runs every log-det selector on the dense twin (`DenseBlockInformation`
 over [N, P, P] blocks: the implementation before the sparse factors; its blocks are the same float32 factors
 scattered to dense on every call, a few % of a dense gain) and prints both times and whether the picks agree. `benchmarks/selection_cost.py` times old vs new per candidate (Fisher pass, gain, commit, end to end).
 `--memory_table` runs the first of --methods (first K of --ks) in both modes, each in its own process, for a growing number of candidates (--pool_sizes, the last = all) and prints
@@ -36,12 +39,13 @@ from pathlib import Path
 import torch
 
 from active import SelectionContext, build_selector, list_selectors, selector_options
-from active.fisher import (FACTOR_STORAGE, DiagonalGainOracle, fisher_view_blocks, fisher_view_diagonals,
-                           fisher_view_factors, parameter_columns)
+from active.fisher import (FACTOR_STORAGE, DiagonalGainOracle, build_oracle, fisher_view_blocks,
+                           fisher_view_diagonals, fisher_view_factors, parameter_columns)
 from active.cover_oracle import CoverageOracle
 from active.gated_oracle import CoverGatedOracle
 from active.logdet import BlockGainOracle, BlockInformation, DenseBlockInformation
 from active.schedule import farthest_point_views
+from arguments import FisherSettings
 from gaussian_renderer import render
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from scene.trained import load_trained
@@ -51,6 +55,7 @@ from utils.io import read_json
 
 
 RESULTS_DIR = Path(__file__).parent / "results"
+SHARED_ORACLE_KINDS = ("logdet", "logdet_cover", "diagonal")  # served by this script's cached factors / diagonals
 
 
 def median_time(fn, items) -> float:
@@ -168,10 +173,11 @@ def main() -> None:
 
     cache, t_cache, cache_mb = {}, 0.0, 0.0
     diag_cache = {}
-    kinds = {build_selector(m).oracle_kind for m in args.methods}
+    configs = [(method, options) for method in args.methods for options in option_grid(method, args.sweep)]
+    kinds = {build_selector(method, **options).oracle_kind for method, options in configs}
     if args.mode == "cached":
         t0 = time.perf_counter()
-        if "logdet" in kinds:
+        if kinds & {"logdet", "logdet_cover"}:
             cache = {v: factors(v) for v in candidates}
         if "diagonal" in kinds:
             diag_cache = {v: diagonals(v) for v in candidates}
@@ -184,11 +190,13 @@ def main() -> None:
     columns = parameter_columns(gaussians, RAW_PARAMETER_GROUPS)
 
     rows = []
-    configs = [(method, options) for method in args.methods for options in option_grid(method, args.sweep)]
     for k in args.ks:
         for method, options in configs:
-            kind = build_selector(method).oracle_kind
-            variants = ["sparse", "dense"] if args.compare_dense and kind == "logdet" else ["sparse"]
+            kind = build_selector(method, **options).oracle_kind
+            if kind not in SHARED_ORACLE_KINDS:
+                variants = ["own"]
+            else:
+                variants = ["sparse", "dense"] if args.compare_dense and kind == "logdet" else ["sparse"]
             for variant in variants:
                 computed = set()
 
@@ -200,15 +208,17 @@ def main() -> None:
                         return cache[v].dense() if cache else factors(v).dense()  # scattered per call
                     return cache[v] if cache else factors(v)
 
-                if kind == "diagonal":
+                if variant == "own":
+                    oracle = build_oracle(kind, gaussians, cams, list(seeds), bg, settings,
+                                          fisher=FisherSettings(fisher_mode=args.mode))
+                elif kind == "diagonal":
                     oracle = DiagonalGainOracle(prior_diag, provider, columns)
                 elif variant == "dense":
                     oracle = DenseGainOracle(DenseBlockInformation(prior), provider)
                 else:
                     oracle = BlockGainOracle(BlockInformation(prior), provider)
                 if kind == "logdet_cover":  # cover_pop: the log-det oracle gated by COVER's score
-                    oracle = CoverGatedOracle(oracle, CoverageOracle(gaussians.means, gaussians.opacities, cams,
-                                                                     list(seeds)))
+                    oracle = CoverGatedOracle(oracle, CoverageOracle.for_model(gaussians, cams, list(seeds)))
                 ctx = SelectionContext(candidates, oracle, torch.Generator().manual_seed(0), 0,
                                        camera_centers=torch.stack([c.camera_center for c in cams]),
                                        train_ids=tuple(seeds))
@@ -216,7 +226,8 @@ def main() -> None:
                 sel = build_selector(method, **options).select(ctx, k)
                 rows.append({"K": k, "method": method, "options": options, "oracle": variant,
                              "conservative": sel.conservative, "evaluated": oracle.evaluated,
-                             "views_computed": len(computed), "select_s": time.perf_counter() - t0,
+                             "views_computed": oracle.views_computed if variant == "own" else len(computed),
+                             "select_s": time.perf_counter() - t0,
                              "ids": sel.ids, "gains": sel.gains})
     print(f"\n{args.mode} mode{' (cache build excluded, see above)' if cache else ''}")
     print_rows(rows)

@@ -90,7 +90,7 @@ def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[in
     prior_seen = diag_max > fisher.delta_abs * (1 + 1e-6) + 1e-300  # an all-zero prior block holds only the ridge
     groups = gaussian_groups(gaussians, cameras, train_ids, prior_seen)
     opacity = gaussians.opacities.detach().double().cpu().reshape(-1)
-    cover = CoverageOracle(gaussians.means, gaussians.opacities, cameras, train_ids)
+    cover = CoverageOracle.for_model(gaussians, cameras, train_ids)
     rows, terms_of = [], {}
     for v in candidate_ids:
         t = per_gaussian_gains(oracle, v)

@@ -1,5 +1,5 @@
-"""benchmarks/bench_selection.py with its default arguments (every oracle selector: the log-det and the diagonal
-kind each get their own oracle) completes on a tiny trained model; --compare_dense agrees with the dense twin."""
+"""benchmarks/bench_selection.py with its default arguments (every oracle selector, each on the oracle its
+`oracle_kind` declares) completes on a tiny trained model; --compare_dense agrees with the dense twin."""
 import json
 
 from tests.conftest import run_cli
@@ -16,6 +16,11 @@ def test_default_arguments_complete_on_a_tiny_model(tiny_scene, tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     rows = json.loads(out.read_text())["rows"]
     assert {r["method"] for r in rows} >= {"pop_gs", "lite_gs", "ssg", "fisherrf"}
+    first_k = {r["method"]: r for r in rows if r["K"] == 3}
+    # cover scores geometry (no Fisher pass) and render_variance its own criterion: neither is the shared log-det
+    assert first_k["cover"]["oracle"] == "own" and first_k["cover"]["views_computed"] == 0
+    assert first_k["render_variance"]["oracle"] == "own" and first_k["render_variance"]["views_computed"] > 0
+    assert first_k["cover"]["ids"] != first_k["pop_gs"]["ids"] or first_k["cover"]["gains"] != first_k["pop_gs"]["gains"]
     for dense in (r for r in rows if r["oracle"] == "dense"):
         sparse = next(s for s in rows if s["oracle"] == "sparse" and (s["K"], s["method"], s["options"]) ==
                       (dense["K"], dense["method"], dense["options"]))

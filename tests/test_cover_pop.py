@@ -121,7 +121,7 @@ def test_the_real_oracle_is_the_fisher_and_cover_committed_together():
     candidates = [v for v in range(len(cams)) if v not in train]
     gated = build_oracle("logdet_cover", gaussians, cams, train, BG, SETTINGS)
     fisher = FisherOracle.build(gaussians, cams, train, BG, SETTINGS, fisher=FisherSettings())
-    cover = CoverageOracle(gaussians.means, gaussians.opacities, cams, train)
+    cover = CoverageOracle.for_model(gaussians, cams, train)
     for view in (candidates[0], candidates[4]):
         assert gated.gain(view) == pytest.approx(fisher.gain(view), rel=1e-12)
         assert gated.cover_gain(view) == pytest.approx(cover.gain(view), rel=1e-12)

@@ -262,6 +262,10 @@ class FisherViewBlocks:
     greedy's cached upper bound, -inf once the view is chosen; a view never hinted counts as -inf), ties and a stage
     without any hint in least-recently-used order; "lru" ignores the hints. The view just requested (the lazy
     greedy's heap top) is never evicted for its own sake.
+
+    With `requests` a list, every candidate request and hint is appended to it in order, ("get", view, bytes) and
+    ("hint", view, bound), so that other eviction policies can be replayed on the same run
+    (`benchmarks/cache_replay.py`); the requests do not depend on the cache, only which of them recompute.
     """
 
     gaussians: GaussianModel
@@ -282,6 +286,7 @@ class FisherViewBlocks:
     _cached_bytes: int = 0
     _seen: set = field(default_factory=set)
     _priority: dict = field(default_factory=dict)  # view id -> the selector's last hint
+    requests: list | None = None  # when a list: the log of requests and hints (see above)
 
     def __post_init__(self) -> None:
         if self.eviction not in EVICTION_POLICIES:
@@ -295,6 +300,8 @@ class FisherViewBlocks:
         """A selector's hint: how likely `view_id` is to be asked for again (a lazy greedy's upper bound on its gain;
         -inf: never again). Under "priority" eviction the lowest is evicted first."""
         self._priority[view_id] = float(bound)
+        if self.requests is not None:
+            self.requests.append(("hint", view_id, float(bound)))
 
     @property
     def cached_bytes(self) -> int:
@@ -331,6 +338,13 @@ class FisherViewBlocks:
 
     def __call__(self, view_id: int) -> ViewFactors | torch.Tensor:
         """The information of one candidate view (from the cache, or computed)."""
+        blocks = self._fetch(view_id)
+        if self.requests is not None:
+            self.requests.append(("get", view_id, nbytes(blocks)))
+        return blocks
+
+    def _fetch(self, view_id: int) -> ViewFactors | torch.Tensor:
+        """`__call__` without the request log."""
         if view_id in self._cache:
             self._cache.move_to_end(view_id)
             return self._cache[view_id]

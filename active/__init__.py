@@ -17,8 +17,8 @@ Public API: `Selector` (subclass it), `SelectionContext` (what `select` receives
 from active.base import GainOracle, Selection, SelectionContext, Selector
 from active.registry import build_selector, build_selector_from, list_selectors, register_selector, selector_options
 # importing a selector's module registers it
-from active.selectors import (cover, cover_pop, coverage, fisherrf, lazy_pop, lite_gs, novel_pop,  # noqa: F401
-                              pop_gs, probe_pop, random, render_variance, ssg)
+from active.selectors import (cover, cover_pool, cover_pop, coverage, fisherrf, lazy_pop, lite_gs,  # noqa: F401
+                              novel_pop, pop_gs, probe_pop, random, render_variance, ssg)
 
 __all__ = ["GainOracle", "Selection", "SelectionContext", "Selector", "build_selector", "build_selector_from",
            "list_selectors", "register_selector", "selector_options"]

@@ -46,6 +46,7 @@ from typing import Callable
 import torch
 
 from active.cover_oracle import CoverageOracle
+from active.pool_cover_oracle import PoolCoverageOracle
 from active.gated_oracle import CoverGatedOracle
 from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite, gram_root_factors
 from active.probes import with_probes
@@ -65,7 +66,7 @@ FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian f
     "full_sh": ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest"),
 }
 ORACLE_KINDS = ("logdet", "logdet_opacity", "logdet_probes", "logdet_cover", "render_variance", "diagonal",
-                "diagonal_reference", "coverage")  # build_oracle's kinds
+                "diagonal_reference", "coverage", "pool_coverage")  # build_oracle's kinds
 FACTOR_STORAGE = torch.float32  # dtype of cached view factors (the float32 accuracy test: tests/test_view_factors.py)
 
 
@@ -510,7 +511,8 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
     oracle with COVER's score beside it (`active.gated_oracle.CoverGatedOracle`), "render_variance" -> the
     same blocks scored by the predicted rendering variance they remove over the candidate poses, "diagonal" ->
     `DiagonalFisherOracle` (every raw parameter group, no ridge), "diagonal_reference" -> the same over FisherRF's
-    code's diagonal (`fisher_view_diagonals_reference`), "coverage" -> COVER's geometric `CoverageOracle` (no Fisher
+    code's diagonal (`fisher_view_diagonals_reference`), "coverage" -> COVER's geometric `CoverageOracle`,
+    "pool_coverage" -> its direction coverage over the pool's poses, `PoolCoverageOracle` (these two make no Fisher
     pass; the Fisher options do not apply)."""
     if kind in ("logdet", "logdet_opacity"):
         return FisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher,
@@ -525,6 +527,8 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
         return FisherOracle.build_render_variance(gaussians, cameras, train_views, background, settings, fisher=fisher)
     if kind == "coverage":
         return CoverageOracle.for_model(gaussians, cameras, train_views)
+    if kind == "pool_coverage":
+        return PoolCoverageOracle.for_model(gaussians, cameras, train_views)
     if kind in ("diagonal", "diagonal_reference"):
         return DiagonalFisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher,
                                           reference=kind == "diagonal_reference")

@@ -67,7 +67,8 @@ PASS_KINDS = ("logdet", "uncertainty", "diagonal")
 # oracle kind -> pass kind (None: no Fisher pass); render_variance holds one more [N, P, P] copy (its target) than
 # the log-det while scoring, inside HEADROOM's margin at the scale of the measurements
 ORACLE_PASSES = {"logdet": "logdet", "logdet_opacity": "logdet", "logdet_probes": "logdet", "logdet_cover": "logdet",
-                 "render_variance": "logdet", "diagonal": "diagonal", "diagonal_reference": "diagonal", "coverage": None}
+                 "render_variance": "logdet", "diagonal": "diagonal", "diagonal_reference": "diagonal", "coverage": None,
+                 "pool_coverage": None}
 NO_FISHER_PASS = "use a selector without a Fisher pass (--method cover, coverage or random)"  # the CLIs' fallback
 assert set(ORACLE_PASSES) == set(ORACLE_KINDS)
 

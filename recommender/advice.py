@@ -16,6 +16,7 @@ on lego and mic, and cover on bonsai (2026-12-06: 21.04 dB against pop_gs's 20.6
 from __future__ import annotations
 
 from active.base import Selector
+from active.memory_budget import ORACLE_PASSES
 
 FEW_VIEWS = 10  # the regime of the recommend-then-train measurements (5 captured views), with a margin
 EVIDENCE = "docs/recommend.md#which-selector-from-few-captured-views"
@@ -26,7 +27,7 @@ def selection_advice(selector: Selector, num_captured: int) -> str | None:
     selector_name = selector.name
     if selector_name == "random":
         return None
-    if not selector.uses_oracle or selector.oracle_kind == "coverage":  # coverage, cover: no Fisher information
+    if not selector.uses_oracle or ORACLE_PASSES[selector.oracle_kind] is None:  # coverage, cover, cover_pool: no Fisher
         return (f"note: {selector_name}'s picks are geometric (what the captured views covered poorly), not Fisher "
                 "information: from 5 captured views cover was above random and level with or above coverage on lego, "
                 f"mic and bonsai, and pop_gs last on lego and bonsai ({EVIDENCE}); --method pop_gs for the Fisher")

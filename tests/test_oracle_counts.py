@@ -43,7 +43,8 @@ FORMULAS = {"pop_gs": lambda m, k, eps: exhaustive(m, k), "lazy_pop": lambda m, 
             "probe_pop": lambda m, k, eps: exhaustive(m, k), "cover_pop": lambda m, k, eps: exhaustive(m, k),
             "lite_gs": stochastic, "ssg": static_subset,
             "random": lambda m, k, eps: 0, "fisherrf": lambda m, k, eps: exhaustive(m, k),
-            "coverage": lambda m, k, eps: 0, "cover": lambda m, k, eps: exhaustive(m, k)}
+            "coverage": lambda m, k, eps: 0, "cover": lambda m, k, eps: exhaustive(m, k),
+            "cover_pool": lambda m, k, eps: exhaustive(m, k)}
 
 
 def selector(method: str, eps: float):

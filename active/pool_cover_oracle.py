@@ -1,0 +1,74 @@
+"""COVER's direction coverage measured over the pool's poses: how well the views taken so far cover each Gaussian as
+seen from every pose of the pool (the poses the scene will plausibly be looked at from), as a counted oracle.
+
+COVER (`active.cover_oracle`) scores a candidate by how new its own view directions are. Here the question is the
+I-optimal one, asked geometrically: after adding v, how far is each pool pose's view of each Gaussian from the
+nearest captured direction? With E_{c,i}(S) = min(1, min_{s in S, i in F(s)} (1 - d_c,i . d_s,i) / 2) for a Gaussian
+i in pose c's frustum F(c) (1 where no view of S sees it), the objective and the gain are
+
+    F(S) = sum_{c in pool} sum_{i in F(c)} w_i E_{c,i}(S),        gain(v | S) = F(S) - F(S + {v}) >= 0,
+
+with w_i the opacity. F(S) - F(S + v) is a facility-location gain (each (c, i) pair takes the nearest captured
+direction), so it only shrinks as S grows: monotone submodular, and lazy greedy over it is exact. Pool = every camera
+of the acquisition step (captured views and candidates); the test poses are never used. No Fisher pass, no
+rendering: a gain costs O(|pool| N).
+"""
+from __future__ import annotations
+
+import torch
+
+from active.cover_oracle import frustum_directions
+from scene.cameras import Camera
+from scene.gaussian_model import GaussianModel
+
+
+class PoolCoverageOracle:
+    """The counted pool-coverage gain oracle of one acquisition step (the `GainOracle` protocol: gain, commit,
+    evaluated)."""
+
+    views_computed = 0  # no Fisher pass: what acquisition reports for the Fisher oracles
+    fisher_seconds = 0.0
+
+    def __init__(self, means: torch.Tensor, weights: torch.Tensor, cameras: list[Camera], train_views: list[int]):
+        """Args:
+            means: Gaussian centres. [N, 3]
+            weights: per-Gaussian weights w_i >= 0 (opacities). [N]
+            cameras: every camera of the pool (view id = index); all of them are the poses covered.
+            train_views: the views taken so far.
+        """
+        means = means.detach().double().cpu()
+        self.weights = weights.detach().double().cpu().reshape(-1)
+        frames = [frustum_directions(means, camera) for camera in cameras]
+        self.inside = torch.stack([inside for inside, _ in frames])  # [V, N] bool: pose c sees Gaussian i
+        self.directions = torch.stack([dirs for _, dirs in frames])  # [V, N, 3] float64
+        self.error = self.inside.double()  # [V, N] E_{c,i}(S): 1 where c sees i and S is empty, 0 where c does not
+        self.evaluated = 0
+        for view in train_views:
+            self.commit(view)
+
+    @classmethod
+    def for_model(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int]) -> PoolCoverageOracle:
+        """The oracle over a model's Gaussians: their centres, weighted by their opacities."""
+        return cls(gaussians.means, gaussians.opacities, cameras, train_views)
+
+    def _error_with(self, view_id: int) -> torch.Tensor:
+        """E(S + {v}). [V, N]"""
+        cos = (self.directions * self.directions[view_id]).sum(-1)  # [V, N] d_c,i . d_v,i
+        taken = torch.where(self.inside & self.inside[view_id], 0.5 * (1.0 - cos), torch.inf)
+        return torch.minimum(self.error, taken)
+
+    def objective(self) -> float:
+        """F(S): the weighted uncovered direction over every (pose, Gaussian) pair."""
+        return float((self.error * self.weights).sum())
+
+    def gain(self, view_id: int) -> float:
+        """gain(v | S) = F(S) - F(S + {v}): one oracle evaluation."""
+        self.evaluated += 1
+        return float(((self.error - self._error_with(view_id)) * self.weights).sum())
+
+    def commit(self, view_id: int) -> None:
+        """S <- S + {v} (not an oracle evaluation)."""
+        self.error = self._error_with(view_id)
+
+    def reset_counts(self) -> None:
+        self.evaluated = 0

@@ -1,0 +1,80 @@
+"""The pool-coverage oracle (`active.pool_cover_oracle`) against its definition written out one pose, Gaussian and
+captured view at a time; its gains only shrink as views are committed (lazy greedy makes exhaustive greedy's
+picks); the `cover_pool` selector through `build_oracle`."""
+import pytest
+import torch
+
+from active.base import SelectionContext
+from active.fisher import build_oracle
+from active.pool_cover_oracle import PoolCoverageOracle
+from active.registry import build_selector
+from active.selectors.lazy_greedy import lazy_greedy_select
+from active.selectors.pop_gs import exhaustive_greedy
+from tests.test_cover import direction, in_frustum, scene
+from tests.test_fisher_cache import spiral_cameras
+from tests.test_view_factors import BG, SETTINGS, model
+
+pytestmark = pytest.mark.usefixtures("single_torch_thread")
+
+
+def reference_objective(means, weights, cameras, committed):
+    """F(S) = sum over poses c and Gaussians i in c's frustum of w_i min(1, min_s (1 - d_c,i . d_s,i) / 2)."""
+    total = 0.0
+    for c in range(len(cameras)):
+        for i in range(means.shape[0]):
+            p = means[i]
+            if not in_frustum(p, cameras[c])[0]:
+                continue
+            error = 1.0
+            for s in committed:
+                if in_frustum(p, cameras[s])[0]:
+                    error = min(error, 0.5 * (1.0 - float(direction(p, cameras[c]) @ direction(p, cameras[s]))))
+            total += float(weights[i]) * error
+    return total
+
+
+def test_gains_are_the_written_out_objective_drop():
+    means, weights, cams = scene(n=40)
+    oracle = PoolCoverageOracle(means, weights, cams, [0, 3])
+    assert oracle.objective() == pytest.approx(reference_objective(means, weights, cams, [0, 3]), rel=1e-10)
+    for view in (1, 5, 8):
+        expected = reference_objective(means, weights, cams, [0, 3]) - reference_objective(means, weights, cams,
+                                                                                            [0, 3, view])
+        assert oracle.gain(view) == pytest.approx(expected, rel=1e-9, abs=1e-12)
+    oracle.commit(5)
+    assert oracle.objective() == pytest.approx(reference_objective(means, weights, cams, [0, 3, 5]), rel=1e-10)
+    assert oracle.gain(5) == pytest.approx(0.0, abs=1e-12)  # a committed view adds nothing
+    assert oracle.evaluated == 4
+
+
+def test_an_empty_prior_counts_every_seen_pair_once():
+    means, weights, cams = scene(n=30, seed=2)
+    oracle = PoolCoverageOracle(means, weights, cams, [])
+    assert oracle.objective() == pytest.approx(reference_objective(means, weights, cams, []), rel=1e-12)
+    assert oracle.objective() > 0
+
+
+def test_gains_only_shrink_so_lazy_greedy_is_exact():
+    means, weights, cams = scene(n=60, seed=1)
+    before = PoolCoverageOracle(means, weights, cams, [0])
+    after = PoolCoverageOracle(means, weights, cams, [0, 4])
+    for view in range(1, 10):
+        assert after.gain(view) <= before.gain(view) + 1e-12
+    plain = exhaustive_greedy(list(range(1, 10)), 4, PoolCoverageOracle(means, weights, cams, [0]))
+    lazy_oracle = PoolCoverageOracle(means, weights, cams, [0])
+    lazy = lazy_greedy_select(list(range(1, 10)), 4, lazy_oracle, lambda j, heap: heap)
+    assert lazy.ids == plain.ids
+    assert lazy_oracle.evaluated <= plain.conservative
+
+
+def test_the_selector_gets_its_oracle_from_build_oracle():
+    gaussians, cams = model(n=120), spiral_cameras(12)
+    selector = build_selector("cover_pool")
+    assert selector.oracle_kind == "pool_coverage" and selector.uses_oracle
+    oracle = build_oracle(selector.oracle_kind, gaussians, cams, [0], BG, SETTINGS)
+    assert isinstance(oracle, PoolCoverageOracle) and oracle.views_computed == 0
+    ctx = SelectionContext(list(range(1, len(cams))), oracle, torch.Generator().manual_seed(0), 0,
+                           camera_centers=torch.stack([c.camera_center for c in cams]))
+    sel = selector.select(ctx, 3)
+    reference = exhaustive_greedy(list(range(1, len(cams))), 3, PoolCoverageOracle.for_model(gaussians, cams, [0]))
+    assert sel.ids == reference.ids and oracle.evaluated < sel.conservative == reference.conservative

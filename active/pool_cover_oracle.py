@@ -20,6 +20,20 @@ import torch
 from active.cover_oracle import frustum_directions
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
+from utils.errors import UserError
+
+
+BYTES_PER_PAIR = 73  # per (pose, Gaussian): directions 24, error 8, inside 1, and a gain's four float64 temporaries
+
+
+def check_memory(num_poses: int, num_gaussians: int) -> None:
+    """A `UserError` when the oracle's [poses, N] arrays would take more than half of the available memory."""
+    from active.fisher import available_memory_bytes  # active.fisher imports this module
+    need, available = num_poses * num_gaussians * BYTES_PER_PAIR, available_memory_bytes()
+    if need > available // 2:
+        raise UserError(f"cover_pool over {num_poses} poses and {num_gaussians} Gaussians needs about "
+                        f"{need / 2**30:.1f} GiB, more than half of the {available / 2**30:.1f} GiB available: use "
+                        "fewer candidates, or --method cover (one pose at a time)")
 
 
 class PoolCoverageOracle:
@@ -37,6 +51,7 @@ class PoolCoverageOracle:
             train_views: the views taken so far.
         """
         means = means.detach().double().cpu()
+        check_memory(len(cameras), means.shape[0])
         self.weights = weights.detach().double().cpu().reshape(-1)
         frames = [frustum_directions(means, camera) for camera in cameras]
         self.inside = torch.stack([inside for inside, _ in frames])  # [V, N] bool: pose c sees Gaussian i

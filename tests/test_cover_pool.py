@@ -6,13 +6,14 @@ import torch
 
 from active.base import SelectionContext
 from active.fisher import build_oracle
-from active.pool_cover_oracle import PoolCoverageOracle
+from active.pool_cover_oracle import PoolCoverageOracle, check_memory
 from active.registry import build_selector
 from active.selectors.lazy_greedy import lazy_greedy_select
 from active.selectors.pop_gs import exhaustive_greedy
 from tests.test_cover import direction, in_frustum, scene
 from tests.test_fisher_cache import spiral_cameras
 from tests.test_view_factors import BG, SETTINGS, model
+from utils.errors import UserError
 
 pytestmark = pytest.mark.usefixtures("single_torch_thread")
 
@@ -78,3 +79,10 @@ def test_the_selector_gets_its_oracle_from_build_oracle():
     sel = selector.select(ctx, 3)
     reference = exhaustive_greedy(list(range(1, len(cams))), 3, PoolCoverageOracle.for_model(gaussians, cams, [0]))
     assert sel.ids == reference.ids and oracle.evaluated < sel.conservative == reference.conservative
+
+
+def test_a_pool_too_large_for_memory_is_one_clear_error(monkeypatch):
+    monkeypatch.setattr("active.fisher.available_memory_bytes", lambda: 1 << 30)
+    check_memory(100, 50_000)  # 0.34 GiB: fits in half of 1 GiB
+    with pytest.raises(UserError, match="fewer candidates, or --method cover"):
+        check_memory(1000, 138_766)

@@ -23,7 +23,7 @@ from scene.gaussian_model import GaussianModel
 from utils.errors import UserError
 
 
-BYTES_PER_PAIR = 73  # per (pose, Gaussian): directions 24, error 8, inside 1, and a gain's four float64 temporaries
+BYTES_PER_PAIR = 91  # per (pose, Gaussian): directions 24, error 8, inside 1; a gain's gathers and temporaries 58
 
 
 def check_memory(num_poses: int, num_gaussians: int) -> None:
@@ -54,9 +54,10 @@ class PoolCoverageOracle:
         check_memory(len(cameras), means.shape[0])
         self.weights = weights.detach().double().cpu().reshape(-1)
         frames = [frustum_directions(means, camera) for camera in cameras]
-        self.inside = torch.stack([inside for inside, _ in frames])  # [V, N] bool: pose c sees Gaussian i
-        self.directions = torch.stack([dirs for _, dirs in frames])  # [V, N, 3] float64
-        self.error = self.inside.double()  # [V, N] E_{c,i}(S): 1 where c sees i and S is empty, 0 where c does not
+        # Gaussian-major, so that a candidate's visible Gaussians are whole rows
+        self.inside = torch.stack([inside for inside, _ in frames], dim=1)  # [N, V] bool: pose c sees Gaussian i
+        self.directions = torch.stack([dirs for _, dirs in frames], dim=1).permute(2, 0, 1).contiguous()  # [3, N, V]
+        self.error = self.inside.double()  # [N, V] E_{c,i}(S): 1 where c sees i and S is empty, 0 where c does not
         self.evaluated = 0
         for view in train_views:
             self.commit(view)
@@ -66,24 +67,30 @@ class PoolCoverageOracle:
         """The oracle over a model's Gaussians: their centres, weighted by their opacities."""
         return cls(gaussians.means, gaussians.opacities, cameras, train_views)
 
-    def _error_with(self, view_id: int) -> torch.Tensor:
-        """E(S + {v}). [V, N]"""
-        cos = (self.directions * self.directions[view_id]).sum(-1)  # [V, N] d_c,i . d_v,i
-        taken = torch.where(self.inside & self.inside[view_id], 0.5 * (1.0 - cos), torch.inf)
-        return torch.minimum(self.error, taken)
+    def _error_with(self, view_id: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """The rows E(S + {v}) changes, those of the Gaussians v sees: (their ids [n], E(S + {v}) there [n, V])."""
+        rows = self.inside[:, view_id].nonzero().squeeze(1)  # [n]
+        d = self.directions[:, rows]  # [3, n, V]
+        ahead = d[:, :, view_id:view_id + 1]  # [3, n, 1] d_v,i
+        cos = d[0] * ahead[0]
+        cos.addcmul_(d[1], ahead[1]).addcmul_(d[2], ahead[2])  # [n, V] d_c,i . d_v,i
+        taken = cos.neg_().add_(1.0).mul_(0.5).masked_fill_(~self.inside[rows], torch.inf)  # (1 - cos) / 2
+        return rows, torch.minimum(self.error[rows], taken)
 
     def objective(self) -> float:
         """F(S): the weighted uncovered direction over every (pose, Gaussian) pair."""
-        return float((self.error * self.weights).sum())
+        return float((self.error * self.weights[:, None]).sum())
 
     def gain(self, view_id: int) -> float:
         """gain(v | S) = F(S) - F(S + {v}): one oracle evaluation."""
         self.evaluated += 1
-        return float(((self.error - self._error_with(view_id)) * self.weights).sum())
+        rows, error = self._error_with(view_id)
+        return float(((self.error[rows] - error) * self.weights[rows, None]).sum())
 
     def commit(self, view_id: int) -> None:
         """S <- S + {v} (not an oracle evaluation)."""
-        self.error = self._error_with(view_id)
+        rows, error = self._error_with(view_id)
+        self.error[rows] = error
 
     def reset_counts(self) -> None:
         self.evaluated = 0

@@ -38,6 +38,7 @@ SOURCES = [
     ("setup1_paper_stages_builtin", "Setup 1, paper stage lengths"),
     ("setup1_bonsai_3seeds", "Setup 1"),
     ("setup1_bonsai_1206", "Setup 1, SfM of 12-06"),
+    ("setup1_bonsai_1206_cover_pool", "Setup 1, SfM of 12-06"),
     ("setup2_nerf400_3seeds", "Setup 2"),
     ("setup3_bonsai_3seeds", "Setup 3"),
     ("fisherrf20_lego_3seeds", "FisherRF 20 views"),

@@ -11,7 +11,7 @@ i in pose c's frustum F(c) (1 where no view of S sees it), the objective and the
 with w_i the opacity. F(S) - F(S + v) is a facility-location gain (each (c, i) pair takes the nearest captured
 direction), so it only shrinks as S grows: monotone submodular, and lazy greedy over it is exact. Pool = every camera
 of the acquisition step (captured views and candidates); the test poses are never used. No Fisher pass, no
-rendering: a gain costs O(|pool| N).
+rendering: a gain costs O(|pool| n_v), n_v the Gaussians the candidate sees.
 """
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ the directions that stand for many poses of the pool. Geometric: no Fisher pass,
 
 The gain is monotone submodular, so the greedy picks are computed lazily over the whole pool, as `lazy_pop` does
 (exhaustive greedy's picks, ties included). Counts: conservative = the exhaustive worst case,
-sum_{j < min(K, M)} (M - j); evaluated = the gains computed (a gain costs O(|pool| N)).
+sum_{j < min(K, M)} (M - j); evaluated = the gains computed (a gain costs O(|pool| n_v), n_v the Gaussians it sees).
 """
 from __future__ import annotations
 

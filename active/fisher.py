@@ -57,6 +57,7 @@ from gaussian_renderer import (RasterSettings, attribute_gram, project_and_shade
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
+from utils.system_memory import available_memory_bytes
 from utils.errors import UserError
 
 log = logging.getLogger(__name__)
@@ -68,18 +69,6 @@ FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian f
 ORACLE_KINDS = ("logdet", "logdet_opacity", "logdet_probes", "logdet_cover", "render_variance", "diagonal",
                 "diagonal_reference", "coverage", "pool_coverage")  # build_oracle's kinds
 FACTOR_STORAGE = torch.float32  # dtype of cached view factors (the float32 accuracy test: tests/test_view_factors.py)
-
-
-def available_memory_bytes() -> int:
-    """MemAvailable from /proc/meminfo (4 GiB when it cannot be read)."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return 4 << 30
 
 
 def fisher_view_blocks(gaussians: GaussianModel, camera: Camera, background: torch.Tensor,

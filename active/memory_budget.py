@@ -39,7 +39,7 @@ from typing import Callable
 import torch
 
 from arguments import FisherSettings
-from active.fisher import (DIAGONAL_GROUPS, FISHER_PARAM_GROUPS, ORACLE_KINDS, available_memory_bytes, cache_budget,
+from active.fisher import (DIAGONAL_GROUPS, FISHER_PARAM_GROUPS, ORACLE_KINDS, cache_budget,
                            parameter_columns)
 from active.probes import PROBE_COUNT
 from active.trapezoid import packed_width
@@ -48,6 +48,7 @@ from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 from scene.resolution_policy import MIN_IMAGE_SIDE
 from utils.errors import UserError
+from utils.system_memory import available_memory_bytes
 
 log = logging.getLogger(__name__)
 
@@ -243,7 +244,7 @@ def _advice(remedies: dict[str, FisherWork | None], usable: int, fallback: str, 
 
 def device_available_bytes(device: torch.device) -> int:
     """Free memory where a pass's tensors live: the CUDA device's (`torch.cuda.mem_get_info`), else the host's
-    MemAvailable (`fisher.available_memory_bytes`)."""
+    MemAvailable (`utils.system_memory.available_memory_bytes`)."""
     return torch.cuda.mem_get_info(device)[0] if device.type == "cuda" else available_memory_bytes()
 
 

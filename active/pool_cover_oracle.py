@@ -20,6 +20,7 @@ import torch
 from active.cover_oracle import frustum_directions
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
+from utils import system_memory
 from utils.errors import UserError
 
 
@@ -28,8 +29,7 @@ BYTES_PER_PAIR = 91  # per (pose, Gaussian): directions 24, error 8, inside 1; a
 
 def check_memory(num_poses: int, num_gaussians: int) -> None:
     """A `UserError` when the oracle's [poses, N] arrays would take more than half of the available memory."""
-    from active.fisher import available_memory_bytes  # active.fisher imports this module
-    need, available = num_poses * num_gaussians * BYTES_PER_PAIR, available_memory_bytes()
+    need, available = num_poses * num_gaussians * BYTES_PER_PAIR, system_memory.available_memory_bytes()
     if need > available // 2:
         raise UserError(f"cover_pool over {num_poses} poses and {num_gaussians} Gaussians needs about "
                         f"{need / 2**30:.1f} GiB, more than half of the {available / 2**30:.1f} GiB available: use "

@@ -46,13 +46,13 @@ import torch
 from active import build_selector
 from active.acquisition import run_selection
 from active.base import Selection, SelectionContext, Selector
-from active.fisher import available_memory_bytes
 from arguments import FisherSettings
 from recommender.pipeline import LoadedModel, candidate_cameras, load_model, make_pool
 from scene.garden import GARDEN, load_garden
 from utils.errors import UserError, run_cli
 from utils.io import atomic_write, write_json
 from utils.provenance import environment_record
+from utils.system_memory import available_memory_bytes
 
 RESULTS_DIR = Path(__file__).parent / "results"
 EXACT = ("pop_gs", "lazy_pop")  # greedy over the whole pool: pick j does not depend on K (one run, the largest K)

@@ -82,7 +82,7 @@ def test_the_selector_gets_its_oracle_from_build_oracle():
 
 
 def test_a_pool_too_large_for_memory_is_one_clear_error(monkeypatch):
-    monkeypatch.setattr("active.fisher.available_memory_bytes", lambda: 1 << 30)
+    monkeypatch.setattr("utils.system_memory.available_memory_bytes", lambda: 1 << 30)
     check_memory(100, 50_000)  # 0.34 GiB: fits in half of 1 GiB
     with pytest.raises(UserError, match="fewer candidates, or --method cover"):
         check_memory(1000, 138_766)

@@ -41,7 +41,7 @@ import logging
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Iterable
 
 import torch
 
@@ -238,6 +238,16 @@ def _projection_jacobian(gaussians: GaussianModel, camera: Camera, param_groups:
 EVICTION_POLICIES = ("priority", "lru")  # FisherViewBlocks.eviction
 
 
+def eviction_victim(cached: Iterable[int], keep: int, eviction: str, priority: dict[int, float]) -> int:
+    """The view `eviction` drops from `cached` (view ids, least recently used first), never `keep`: the lowest hinted
+    priority (unhinted views count as -inf; the least recently used among equals) under "priority" once any hint
+    came, else the least recently used. `FisherViewBlocks` evicts with it; benchmarks/cache_replay.py replays it."""
+    others = (v for v in cached if v != keep)
+    if eviction == "lru" or not priority:
+        return next(others)
+    return min(others, key=lambda v: priority.get(v, -float("inf")))  # first minimum
+
+
 @dataclass
 class FisherViewBlocks:
     """Per-view Fisher information of one model: computed on demand, kept in a cache bounded in bytes (cached mode)
@@ -358,16 +368,9 @@ class FisherViewBlocks:
             self._cache[view_id] = blocks
             self._cached_bytes += size
             while len(self._cache) > 1 and self._cached_bytes > self.cache_bytes:
-                self._cached_bytes -= nbytes(self._cache.pop(self._victim(view_id)))
+                victim = eviction_victim(self._cache, view_id, self.eviction, self._priority)
+                self._cached_bytes -= nbytes(self._cache.pop(victim))
         return blocks
-
-    def _victim(self, keep: int) -> int:
-        """The cached view to evict, never `keep` (the view just added): the lowest hinted priority (the oldest use
-        among equals) under "priority" eviction once any hint came, else the least recently used."""
-        if self.eviction == "lru" or not self._priority:
-            return next(iter(self._cache))  # `keep` was added last
-        low = -float("inf")
-        return min((v for v in self._cache if v != keep), key=lambda v: self._priority.get(v, low))  # first minimum
 
 
 def nbytes(blocks: ViewFactors | torch.Tensor) -> int:

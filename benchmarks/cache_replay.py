@@ -35,6 +35,7 @@ import torch
 from active import build_selector
 from active.acquisition import run_selection
 from active.base import Selection, SelectionContext, Selector
+from active.fisher import eviction_victim
 from benchmarks.cost_study import UNLIMITED_MB, load_source, selector_setting
 from recommender.pipeline import candidate_cameras, make_pool
 from utils.errors import UserError, run_cli
@@ -95,13 +96,12 @@ def replay(requests: list[Request], budget_bytes: int, policy: str) -> int:
 
 def victim(cache: OrderedDict[int, int], keep: int, policy: str, hints: dict[int, float],
            next_use: dict[int, float]) -> int:
-    """The cached view `policy` evicts (never `keep`); ties go to the least recently requested."""
-    others = [v for v in cache if v != keep]
-    if policy == "lru" or (policy == "priority" and not hints):
-        return others[0]
-    if policy == "priority":
-        return min(others, key=lambda v: hints.get(v, -math.inf))
-    return max(others, key=lambda v: next_use[v])
+    """The cached view `policy` evicts (never `keep`): "lru" and "priority" as `FisherViewBlocks` does
+    (`active.fisher.eviction_victim`), "min" the one requested furthest ahead (the least recently requested among
+    equals)."""
+    if policy != "min":
+        return eviction_victim(cache, keep, policy, hints)
+    return max((v for v in cache if v != keep), key=lambda v: next_use[v])
 
 
 class _RecordingSelector(Selector):

@@ -86,6 +86,17 @@ def run_cli(*args: str, cwd: Path = ROOT, timeout: int = 240) -> subprocess.Comp
 
 
 @pytest.fixture(scope="session")
+def tiny_model(tiny_scene, tmp_path_factory) -> Path:
+    """A passive model trained for 30 iterations on the tiny scene (300 random points, SH degree 1), shared read-only
+    by the benchmark tests (made once per session)."""
+    model = tmp_path_factory.mktemp("tiny_model") / "model"
+    r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(model), "--iterations", "30", "--num_random_points",
+                "300", "--quiet", "--sh_degree", "1")
+    assert r.returncode == 0, r.stderr
+    return model
+
+
+@pytest.fixture(scope="session")
 def active_model(tiny_scene, tmp_path_factory) -> Path:
     """A finished pop_gs run on the tiny scene (2 seed views, 2 stages, 8 views), rendered with uncertainty maps
     and evaluated (metrics.py --report also writes its report.html): a model directory with everything a run report

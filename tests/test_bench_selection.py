@@ -5,13 +5,9 @@ import json
 from tests.conftest import run_cli
 
 
-def test_default_arguments_complete_on_a_tiny_model(tiny_scene, tmp_path):
-    model = tmp_path / "model"
-    r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(model), "--iterations", "30", "--num_random_points",
-                "300", "--quiet", "--sh_degree", "1")
-    assert r.returncode == 0, r.stderr
+def test_default_arguments_complete_on_a_tiny_model(tiny_model, tmp_path):
     out = tmp_path / "bench.json"
-    r = run_cli("benchmarks/bench_selection.py", "--model", str(model), "--json", str(out), "--compare_dense",
+    r = run_cli("benchmarks/bench_selection.py", "--model", str(tiny_model), "--json", str(out), "--compare_dense",
                 timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     rows = json.loads(out.read_text())["rows"]

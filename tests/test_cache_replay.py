@@ -58,13 +58,9 @@ def test_a_view_larger_than_the_budget_streams_the_rest():
     assert replay(as_requests([1, 1, 2, 2]) + [("get", 3, 99)] + as_requests([1, 1]), 20, "lru") == 5
 
 
-def test_replay_counts_what_the_real_cache_counts(tiny_scene, tmp_path):
-    model = tmp_path / "model"
-    r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(model), "--iterations", "30", "--num_random_points",
-                "300", "--quiet", "--sh_degree", "1")
-    assert r.returncode == 0, r.stderr
+def test_replay_counts_what_the_real_cache_counts(tiny_model, tmp_path):
     out = tmp_path / "replay.json"
-    r = run_cli("benchmarks/cache_replay.py", "--model", str(model), "--ms", "8", "--ks", "1", "3", "--selectors",
+    r = run_cli("benchmarks/cache_replay.py", "--model", str(tiny_model), "--ms", "8", "--ks", "1", "3", "--selectors",
                 "lazy_pop", "lite_gs:0.3", "--threads", "1", "--verify", "--json", str(out), timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     rows = json.loads(out.read_text())["rows"]

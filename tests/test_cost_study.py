@@ -13,18 +13,14 @@ pytestmark = pytest.mark.usefixtures("single_torch_thread")  # run_config sets o
 
 
 @pytest.fixture(scope="module")
-def study(tiny_scene, tmp_path_factory):
+def study(tiny_model, tmp_path_factory):
     """(model directory, results JSON path, its rows) of the smoke preset."""
     tmp = tmp_path_factory.mktemp("cost_study")
-    model = tmp / "model"
-    r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(model), "--iterations", "30", "--num_random_points",
-                "300", "--quiet", "--sh_degree", "1")
-    assert r.returncode == 0, r.stderr
     out = tmp / "study.json"
-    r = run_cli("benchmarks/cost_study.py", "--preset", "smoke", "--model", str(model), "--threads", "1", "--json",
+    r = run_cli("benchmarks/cost_study.py", "--preset", "smoke", "--model", str(tiny_model), "--threads", "1", "--json",
                 str(out), timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
-    return model, out, json.loads(out.read_text())["rows"]
+    return tiny_model, out, json.loads(out.read_text())["rows"]
 
 
 def test_every_configuration_finishes_with_consistent_counts(study):

@@ -67,7 +67,7 @@ FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian f
     "full_sh": ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest"),
 }
 ORACLE_KINDS = ("logdet", "logdet_opacity", "logdet_probes", "logdet_cover", "render_variance", "diagonal",
-                "diagonal_reference", "coverage", "pool_coverage")  # build_oracle's kinds
+                "diagonal_reference", "coverage", "pool_coverage", "pool_coverage_pixels")  # build_oracle's kinds
 FACTOR_STORAGE = torch.float32  # dtype of cached view factors (the float32 accuracy test: tests/test_view_factors.py)
 
 
@@ -504,8 +504,9 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
     same blocks scored by the predicted rendering variance they remove over the candidate poses, "diagonal" ->
     `DiagonalFisherOracle` (every raw parameter group, no ridge), "diagonal_reference" -> the same over FisherRF's
     code's diagonal (`fisher_view_diagonals_reference`), "coverage" -> COVER's geometric `CoverageOracle`,
-    "pool_coverage" -> its direction coverage over the pool's poses, `PoolCoverageOracle` (these two make no Fisher
-    pass; the Fisher options do not apply)."""
+    "pool_coverage" -> its direction coverage over the pool's poses, `PoolCoverageOracle`, "pool_coverage_pixels" ->
+    the same weighted by the pixels each Gaussian paints in each pose (one render per pose; these three make no
+    Fisher pass; the Fisher options do not apply)."""
     if kind in ("logdet", "logdet_opacity"):
         return FisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher,
                                   gain_weight="opacity" if kind == "logdet_opacity" else "none")
@@ -519,8 +520,9 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
         return FisherOracle.build_render_variance(gaussians, cameras, train_views, background, settings, fisher=fisher)
     if kind == "coverage":
         return CoverageOracle.for_model(gaussians, cameras, train_views)
-    if kind == "pool_coverage":
-        return PoolCoverageOracle.for_model(gaussians, cameras, train_views)
+    if kind in ("pool_coverage", "pool_coverage_pixels"):
+        return PoolCoverageOracle.for_model(gaussians, cameras, train_views, settings=settings,
+                                            weight="pixels" if kind == "pool_coverage_pixels" else "opacity")
     if kind in ("diagonal", "diagonal_reference"):
         return DiagonalFisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher,
                                           reference=kind == "diagonal_reference")

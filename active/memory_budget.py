@@ -69,7 +69,7 @@ PASS_KINDS = ("logdet", "uncertainty", "diagonal")
 # the log-det while scoring, inside HEADROOM's margin at the scale of the measurements
 ORACLE_PASSES = {"logdet": "logdet", "logdet_opacity": "logdet", "logdet_probes": "logdet", "logdet_cover": "logdet",
                  "render_variance": "logdet", "diagonal": "diagonal", "diagonal_reference": "diagonal", "coverage": None,
-                 "pool_coverage": None}
+                 "pool_coverage": None, "pool_coverage_pixels": None}
 NO_FISHER_PASS = "use a selector without a Fisher pass (--method cover, coverage or random)"  # the CLIs' fallback
 assert set(ORACLE_PASSES) == set(ORACLE_KINDS)
 

@@ -12,12 +12,20 @@ with w_i the opacity. F(S) - F(S + v) is a facility-location gain (each (c, i) p
 direction), so it only shrinks as S grows: monotone submodular, and lazy greedy over it is exact. Pool = every camera
 of the acquisition step (captured views and candidates); the test poses are never used. No Fisher pass, no
 rendering: a gain costs O(|pool| n_v), n_v the Gaussians the candidate sees.
+
+With `weight="pixels"` the weight of a pair is pose-dependent, w_c,i = the pixels of c's image Gaussian i paints
+(its blend weight summed, occlusion included, `active.blend_weights`), and "c sees i" means i paints at least
+`VISIBLE_PIXELS` of c's image instead of "i's centre lies in c's frustum": F(S) is then the pool's rendered pixels
+weighted by how far their Gaussians lie, in direction, from the nearest captured view that actually sees them.
+One render (forward and backward) per pose; the gains stay facility-location gains.
 """
 from __future__ import annotations
 
 import torch
 
+from active.blend_weights import VISIBLE_PIXELS, blend_weights
 from active.cover_oracle import frustum_directions
+from gaussian_renderer.settings import RasterSettings
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
 from utils import system_memory
@@ -25,11 +33,14 @@ from utils.errors import UserError
 
 
 BYTES_PER_PAIR = 91  # per (pose, Gaussian): directions 24, error 8, inside 1; a gain's gathers and temporaries 58
+POSE_WEIGHT_BYTES = 16  # per pair with pose-dependent weights: the weight 8 and its gather 8
+POOL_WEIGHTS = ("opacity", "pixels")  # cover_pool's --pool_weight
 
 
-def check_memory(num_poses: int, num_gaussians: int) -> None:
+def check_memory(num_poses: int, num_gaussians: int, pose_weights: bool = False) -> None:
     """A `UserError` when the oracle's [poses, N] arrays would take more than half of the available memory."""
-    need, available = num_poses * num_gaussians * BYTES_PER_PAIR, system_memory.available_memory_bytes()
+    per_pair = BYTES_PER_PAIR + (POSE_WEIGHT_BYTES if pose_weights else 0)
+    need, available = num_poses * num_gaussians * per_pair, system_memory.available_memory_bytes()
     if need > available // 2:
         raise UserError(f"cover_pool over {num_poses} poses and {num_gaussians} Gaussians needs about "
                         f"{need / 2**30:.1f} GiB, more than half of the {available / 2**30:.1f} GiB available: use "
@@ -43,19 +54,24 @@ class PoolCoverageOracle:
     views_computed = 0  # no Fisher pass: what acquisition reports for the Fisher oracles
     fisher_seconds = 0.0
 
-    def __init__(self, means: torch.Tensor, weights: torch.Tensor, cameras: list[Camera], train_views: list[int]):
+    def __init__(self, means: torch.Tensor, weights: torch.Tensor, cameras: list[Camera], train_views: list[int],
+                 inside: torch.Tensor | None = None):
         """Args:
             means: Gaussian centres. [N, 3]
-            weights: per-Gaussian weights w_i >= 0 (opacities). [N]
+            weights: per-Gaussian weights w_i >= 0 (opacities) [N], or per pair w_c,i [N, V].
             cameras: every camera of the pool (view id = index); all of them are the poses covered.
             train_views: the views taken so far.
+            inside: which pose sees which Gaussian [N, V] bool (default: the centre lies in the pose's frustum).
         """
         means = means.detach().double().cpu()
-        check_memory(len(cameras), means.shape[0])
-        self.weights = weights.detach().double().cpu().reshape(-1)
+        check_memory(len(cameras), means.shape[0], pose_weights=weights.ndim == 2)
+        weights = weights.detach().double().cpu()
+        self.weights = weights if weights.ndim == 2 else weights.reshape(-1, 1)  # [N, V] or [N, 1]
         frames = [frustum_directions(means, camera) for camera in cameras]
         # Gaussian-major, so that a candidate's visible Gaussians are whole rows
-        self.inside = torch.stack([inside for inside, _ in frames], dim=1)  # [N, V] bool: pose c sees Gaussian i
+        if inside is None:
+            inside = torch.stack([seen for seen, _ in frames], dim=1)
+        self.inside = inside.cpu()  # [N, V] bool: pose c sees Gaussian i
         self.directions = torch.stack([dirs for _, dirs in frames], dim=1).permute(2, 0, 1).contiguous()  # [3, N, V]
         self.error = self.inside.double()  # [N, V] E_{c,i}(S): 1 where c sees i and S is empty, 0 where c does not
         self.evaluated = 0
@@ -63,9 +79,17 @@ class PoolCoverageOracle:
             self.commit(view)
 
     @classmethod
-    def for_model(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int]) -> PoolCoverageOracle:
-        """The oracle over a model's Gaussians: their centres, weighted by their opacities."""
-        return cls(gaussians.means, gaussians.opacities, cameras, train_views)
+    def for_model(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
+                  weight: str = "opacity", settings: RasterSettings | None = None) -> PoolCoverageOracle:
+        """The oracle over a model's Gaussians: their centres, weighted by their opacities (`weight="opacity"`) or by
+        the pixels each paints in each pose (`weight="pixels"`, one render per pose with `settings`)."""
+        if weight == "opacity":
+            return cls(gaussians.means, gaussians.opacities, cameras, train_views)
+        if weight != "pixels":
+            raise ValueError(f"weight must be one of {', '.join(POOL_WEIGHTS)}, got {weight!r}")
+        check_memory(len(cameras), gaussians.means.shape[0], pose_weights=True)  # before the renders
+        pixels = torch.stack([blend_weights(gaussians, camera, settings) for camera in cameras], dim=1)  # [N, V]
+        return cls(gaussians.means, pixels, cameras, train_views, inside=pixels >= VISIBLE_PIXELS)
 
     def _error_with(self, view_id: int) -> tuple[torch.Tensor, torch.Tensor]:
         """The rows E(S + {v}) changes, those of the Gaussians v sees: (their ids [n], E(S + {v}) there [n, V])."""
@@ -79,13 +103,13 @@ class PoolCoverageOracle:
 
     def objective(self) -> float:
         """F(S): the weighted uncovered direction over every (pose, Gaussian) pair."""
-        return float((self.error * self.weights[:, None]).sum())
+        return float((self.error * self.weights).sum())
 
     def gain(self, view_id: int) -> float:
         """gain(v | S) = F(S) - F(S + {v}): one oracle evaluation."""
         self.evaluated += 1
         rows, error = self._error_with(view_id)
-        return float(((self.error[rows] - error) * self.weights[rows, None]).sum())
+        return float(((self.error[rows] - error) * self.weights[rows]).sum())
 
     def commit(self, view_id: int) -> None:
         """S <- S + {v} (not an oracle evaluation)."""

@@ -1,10 +1,12 @@
 """The pool-coverage oracle (`active.pool_cover_oracle`) against its definition written out one pose, Gaussian and
-captured view at a time; its gains only shrink as views are committed (lazy greedy makes exhaustive greedy's
-picks); the `cover_pool` selector through `build_oracle`."""
+captured view at a time, with opacity and with per-pose pixel weights; its gains only shrink as views are committed
+(lazy greedy makes exhaustive greedy's picks); the `cover_pool` selector and its `--pool_weight` through
+`build_oracle`."""
 import pytest
 import torch
 
 from active.base import SelectionContext
+from active.blend_weights import VISIBLE_PIXELS, blend_weights
 from active.fisher import build_oracle
 from active.pool_cover_oracle import PoolCoverageOracle, check_memory
 from active.registry import build_selector
@@ -32,6 +34,35 @@ def reference_objective(means, weights, cameras, committed):
                     error = min(error, 0.5 * (1.0 - float(direction(p, cameras[c]) @ direction(p, cameras[s]))))
             total += float(weights[i]) * error
     return total
+
+
+def reference_pixel_objective(means, pair_weights, seen, cameras, committed):
+    """F(S) = sum over poses c and Gaussians i that c sees of w_c,i min(1, min_{s sees i} (1 - d_c,i . d_s,i) / 2)."""
+    total = 0.0
+    for c in range(len(cameras)):
+        for i in range(means.shape[0]):
+            if not seen[i, c]:
+                continue
+            error = 1.0
+            for s in committed:
+                if seen[i, s]:
+                    error = min(error, 0.5 * (1.0 - float(direction(means[i], cameras[c]) @
+                                                          direction(means[i], cameras[s]))))
+            total += float(pair_weights[i, c]) * error
+    return total
+
+
+def test_pose_dependent_weights_and_visibility_are_the_written_out_objective():
+    means, _, cams = scene(n=40, seed=4)
+    g = torch.Generator().manual_seed(4)
+    pair_weights = torch.rand(40, len(cams), generator=g, dtype=torch.float64) * 30  # [N, V] pixels
+    seen = pair_weights > 8.0  # about a quarter of the pairs are hidden
+    oracle = PoolCoverageOracle(means, pair_weights, cams, [1, 6], inside=seen)
+    before = reference_pixel_objective(means, pair_weights, seen, cams, [1, 6])
+    assert oracle.objective() == pytest.approx(before, rel=1e-10)
+    for view in (0, 4, 9):
+        after = reference_pixel_objective(means, pair_weights, seen, cams, [1, 6, view])
+        assert oracle.gain(view) == pytest.approx(before - after, rel=1e-9, abs=1e-12)
 
 
 def test_gains_are_the_written_out_objective_drop():
@@ -79,6 +110,27 @@ def test_the_selector_gets_its_oracle_from_build_oracle():
     sel = selector.select(ctx, 3)
     reference = exhaustive_greedy(list(range(1, len(cams))), 3, PoolCoverageOracle.for_model(gaussians, cams, [0]))
     assert sel.ids == reference.ids and oracle.evaluated < sel.conservative == reference.conservative
+
+
+def test_pool_weight_pixels_renders_each_pose_and_keeps_exact_greedy():
+    gaussians, cams = model(n=120), spiral_cameras(12)
+    selector = build_selector("cover_pool", pool_weight="pixels")
+    assert selector.oracle_kind == "pool_coverage_pixels"
+    oracle = build_oracle(selector.oracle_kind, gaussians, cams, [0], BG, SETTINGS)
+    pixels = torch.stack([blend_weights(gaussians, camera, SETTINGS) for camera in cams], dim=1)  # [N, V]
+    torch.testing.assert_close(oracle.weights, pixels)
+    assert torch.equal(oracle.inside, pixels >= VISIBLE_PIXELS)
+    ctx = SelectionContext(list(range(1, len(cams))), oracle, torch.Generator().manual_seed(0), 0,
+                           camera_centers=torch.stack([c.camera_center for c in cams]))
+    sel = selector.select(ctx, 3)
+    reference = exhaustive_greedy(list(range(1, len(cams))), 3, PoolCoverageOracle(
+        gaussians.means, pixels, cams, [0], inside=pixels >= VISIBLE_PIXELS))
+    assert sel.ids == reference.ids
+
+
+def test_an_unknown_pool_weight_is_one_error_line():
+    with pytest.raises(UserError, match="--pool_weight must be one of opacity, pixels"):
+        build_selector("cover_pool", pool_weight="area")
 
 
 def test_a_pool_too_large_for_memory_is_one_clear_error(monkeypatch):

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import torch
 
-from active import build_selector
+from experiments.method_spec import selector_from_spec
 from recommender.outputs import write_outputs
 from recommender.pipeline import candidate_cameras, load_model, make_pool, recommend
 from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions, make_builtin_scene, render_rgba, scene_gaussians
@@ -78,7 +78,7 @@ def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dic
         model = load_model(model_path)
         pool = make_pool(model, candidate_cameras(f"hemisphere:{args.candidates}", model, elevation=args.elevation))
         k = min(args.k, args.budget - len(frames))
-        rec = recommend(model, pool, build_selector(method), k, seed=seed * 1000 + len(rounds))
+        rec = recommend(model, pool, selector_from_spec(method), k, seed=seed * 1000 + len(rounds))
         write_outputs(rec, model, out / f"recommend_{len(frames):02d}", candidates_spec=f"hemisphere:{args.candidates}",
                       previews=False)
         record["recommend_seconds"] = time.perf_counter() - t0
@@ -142,6 +142,8 @@ def run_capture_loop(args: argparse.Namespace) -> None:
         plot(Path(args.plot), png)
         return
     root = Path(args.output)
+    for method in args.methods:
+        selector_from_spec(method)  # a bad name or option: one error line before any loop runs
     for method in args.methods:
         for seed in args.seeds:
             run_loop(method, seed, root / method / f"seed{seed}", args)

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from experiments.jobs import THREAD_VARS
+from experiments.method_spec import method_flags
 from experiments.seed_dataset import make_seed_dataset
 from utils import model_dir
 from utils.checkpoint import RunDirectory
@@ -19,20 +20,6 @@ from utils.errors import UserError
 from utils.io import read_json, write_json
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def method_args(spec: str) -> list[str]:
-    """recommend.py's selector flags for a method spec NAME[+OPTION=VALUE...], e.g. "pop_gs+gain_weight=opacity"
-    -> ["--method", "pop_gs", "--gain_weight", "opacity"]; the spec itself labels the results."""
-    name, *options = spec.split("+")
-    flags = ["--method", name]
-    for option in options:
-        key, sep, value = option.partition("=")
-        if not sep or not key or not value:
-            raise UserError(f"method {spec!r}: write selector options as NAME+OPTION=VALUE "
-                            "(e.g. pop_gs+gain_weight=opacity)")
-        flags += [f"--{key}", value]
-    return flags
 
 
 def run(cmd: list[str], threads: int, log: Path) -> float:
@@ -151,7 +138,7 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
             if method != "none" and "picks" not in row:
                 rec_dir = out / "recommend" / f"{method}_seed{seed}"
                 secs = run(["recommend.py", "-m", str(base), "--candidates", str(seed_data.candidate_poses),
-                            "-k", str(args.k), *method_args(method), "--seed", str(seed), "--iteration",
+                            "-k", str(args.k), *method_flags(method), "--seed", str(seed), "--iteration",
                             str(select_at), "-o", str(rec_dir),
                             "--quiet", "--no_previews"], args.threads, out / "logs" / f"recommend_{method}_{seed}.log")
                 rec = read_json(rec_dir / "recommendations.json")

@@ -9,7 +9,7 @@ their seeds) and 0.30 dB above it on mic, 7.7 dB below it in the capture loop. O
 snapshot pop_gs was 0.21 and 0.39 dB above coverage on lego and mic, 0.49 and 0.95 dB below it on bonsai and the
 built-in scene. No statistic of the model is known that tells the Fisher's good cases apart, so the line states the
 evidence rather than a rule. With models trained on the paper's stage lengths (Setup 1, docs/results.md) the Fisher
-selectors led on lego, mic and the built-in scene, and cover on bonsai.
+selectors led on lego, mic and the built-in scene, and cover_pool on bonsai.
 """
 from __future__ import annotations
 

@@ -2,11 +2,11 @@
 "cover_pool+pool_weight=pixels"); the spec itself labels the results."""
 from __future__ import annotations
 
-import ast
-from typing import Any
+import typing
 
 from active import build_selector
 from active.base import Selector
+from active.registry import selector_options_dataclass
 from utils.errors import UserError
 
 
@@ -29,15 +29,16 @@ def method_flags(spec: str) -> list[str]:
     return ["--method", name, *(arg for key, value in options.items() for arg in (f"--{key}", value))]
 
 
-def _literal(value: str) -> Any:
-    """A number or boolean as written ("0.7" -> 0.7), any other value as the string."""
-    try:
-        return ast.literal_eval(value)
-    except (ValueError, SyntaxError):
-        return value
-
-
 def selector_from_spec(spec: str) -> Selector:
-    """The selector a spec names, built with its options (unknown ones: `build_selector`'s one-line error)."""
+    """The selector a spec names, built with its options typed as the CLIs type the same flags (by the option's field
+    type, `arguments.add_config_args`; every selector option is a str or a float); a value of the wrong type or an
+    unknown option is one error line."""
     name, options = parse_method_spec(spec)
-    return build_selector(name, **{key: _literal(value) for key, value in options.items()})
+    types = typing.get_type_hints(selector_options_dataclass())  # option -> its type, over every registered selector
+    typed = {}
+    for key, value in options.items():
+        try:
+            typed[key] = types[key](value) if key in types else value  # unknown: build_selector names the valid ones
+        except ValueError:
+            raise UserError(f"method {spec!r}: --{key} takes a {types[key].__name__}, got {value!r}") from None
+    return build_selector(name, **typed)

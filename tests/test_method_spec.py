@@ -1,5 +1,5 @@
 """Method specs NAME[+OPTION=VALUE...] of the experiment scripts (`experiments.method_spec`): parsed to the CLIs'
-flags and to a selector with typed options; a malformed spec or an unknown option is one error line."""
+flags and to a selector with its options typed as the CLIs type them; a malformed spec or an unknown option is one error line."""
 import re
 
 import pytest
@@ -26,6 +26,7 @@ def test_a_spec_builds_its_selector_with_typed_options():
     ("pop_gs+gain_weight", "write selector options as NAME+OPTION=VALUE"),
     ("cover_pool+pool_weight=area", "--pool_weight must be one of opacity, pixels"),
     ("cover_pool+eps=0.1", "has no option eps"),
+    ("cover_pop+cover_gate=high", "--cover_gate takes a float, got 'high'"),
     ("no_such_selector", "no_such_selector"),
 ])
 def test_bad_specs_are_one_error_line(spec, message):

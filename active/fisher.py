@@ -57,8 +57,8 @@ from gaussian_renderer import (RasterSettings, attribute_gram, project_and_shade
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
-from utils.system_memory import available_memory_bytes
 from utils.errors import UserError
+from utils.system_memory import available_memory_bytes
 
 log = logging.getLogger(__name__)
 

@@ -13,7 +13,6 @@ sum_{j < min(K, M)} (M - j); evaluated = the gains computed (a gain costs O(|poo
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from active.pool_cover_oracle import POOL_WEIGHTS
 from active.registry import register_selector
@@ -36,6 +35,6 @@ class CoverPoolConfig:
 class CoverPoolSelector(LazyPopSelector):
     """Lazy greedy on the pool-coverage gain over every remaining candidate; ties to the lowest id."""
 
-    def __init__(self, config: Any = None):
+    def __init__(self, config: CoverPoolConfig | None = None):
         self.config = config if config is not None else CoverPoolConfig()
         self.oracle_kind = "pool_coverage" if self.config.pool_weight == "opacity" else "pool_coverage_pixels"

@@ -109,9 +109,10 @@ def check_k(k: int) -> None:
         raise UserError(f"--views_per_step (K) must be positive, got {k}")
 
 
-GAIN_WEIGHTS = ("none", "opacity")  # --gain_weight: how the log-det selectors weigh each Gaussian's term
+GAIN_WEIGHTS = ("none", "opacity", "area")  # --gain_weight: how the log-det selectors weigh each Gaussian's term
 GAIN_WEIGHT_HELP = (f"log-det selectors: weight of each Gaussian's term, one of {', '.join(GAIN_WEIGHTS)} ('opacity': "
-                    "by its opacity, so Gaussians that barely change a pixel count little)")
+                    "by its opacity, so Gaussians that barely change a pixel count little; 'area': by the surface area "
+                    "it stands for, so a densified region does not count once per Gaussian)")
 
 
 def check_gain_weight(gain_weight: str) -> str:
@@ -122,8 +123,8 @@ def check_gain_weight(gain_weight: str) -> str:
 
 
 def logdet_oracle_kind(gain_weight: str) -> str:
-    """The oracle kind of a log-det selector: "logdet", or "logdet_opacity" (each Gaussian's log-det term weighted
-    by its opacity, `active.fisher.build_oracle`)."""
+    """The oracle kind of a log-det selector: "logdet", or "logdet_<weight>" (each Gaussian's log-det term weighted,
+    `active.gain_weights`, `active.fisher.build_oracle`)."""
     return "logdet" if check_gain_weight(gain_weight) == "none" else f"logdet_{gain_weight}"
 
 

@@ -46,6 +46,7 @@ from typing import Callable, Iterable
 import torch
 
 from active.cover_oracle import CoverageOracle
+from active.gain_weights import gain_weights
 from active.pool_cover_oracle import PoolCoverageOracle
 from active.gated_oracle import CoverGatedOracle
 from active.logdet import BlockGainOracle, BlockInformation, ViewFactors, check_finite, gram_root_factors
@@ -66,7 +67,7 @@ FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian f
     "default": ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
     "full_sh": ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest"),
 }
-ORACLE_KINDS = ("logdet", "logdet_opacity", "logdet_probes", "logdet_cover", "render_variance", "diagonal",
+ORACLE_KINDS = ("logdet", "logdet_opacity", "logdet_area", "logdet_probes", "logdet_cover", "render_variance", "diagonal",
                 "diagonal_reference", "coverage", "pool_coverage", "pool_coverage_pixels")  # build_oracle's kinds
 FACTOR_STORAGE = torch.float32  # dtype of cached view factors (the float32 accuracy test: tests/test_view_factors.py)
 
@@ -415,11 +416,11 @@ class FisherOracle(_ViewStatistics, BlockGainOracle):
               settings: RasterSettings, *, fisher: FisherSettings = FisherSettings(),
               gain_weight: str = "none") -> "FisherOracle":
         """Compute the prior from `train_views` and return an oracle over the other views of `cameras` (all of
-        `fisher` applies); with `gain_weight="opacity"` each Gaussian's log-det term is weighted by its opacity
-        (`active.base.GAIN_WEIGHTS`)."""
+        `fisher` applies); with `gain_weight` other than "none" each Gaussian's log-det term is weighted by its
+        opacity or its area share (`active.gain_weights`)."""
         source, prior = source_and_prior(gaussians, cameras, train_views, background, settings, fisher)
-        weights = gaussians.opacities.detach() if gain_weight == "opacity" else None
-        return cls(BlockInformation(prior, delta_rel=fisher.delta_rel, delta_abs=fisher.delta_abs), source, weights)
+        return cls(BlockInformation(prior, delta_rel=fisher.delta_rel, delta_abs=fisher.delta_abs), source,
+                   gain_weights(gaussians, gain_weight))
 
     @classmethod
     def build_render_variance(cls, gaussians: GaussianModel, cameras: list[Camera], train_views: list[int],
@@ -498,7 +499,8 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
                  background: torch.Tensor, settings: RasterSettings, *, fisher: FisherSettings = FisherSettings()
                  ) -> FisherOracle | DiagonalFisherOracle | CoverageOracle:
     """The oracle of `kind` (a selector's `oracle_kind`): "logdet" -> `FisherOracle` (ridge and `fisher_params`
-    apply), "logdet_opacity" -> the same with each Gaussian's term weighted by its opacity, "logdet_probes" -> the same over
+    apply), "logdet_opacity" / "logdet_area" -> the same with each Gaussian's term weighted by its opacity / the
+    surface area it stands for (`active.gain_weights`), "logdet_probes" -> the same over
     the model and probe Gaussians in the space no training view observed (`active.probes`), "logdet_cover" -> the log-det
     oracle with COVER's score beside it (`active.gated_oracle.CoverGatedOracle`), "render_variance" -> the
     same blocks scored by the predicted rendering variance they remove over the candidate poses, "diagonal" ->
@@ -507,9 +509,9 @@ def build_oracle(kind: str, gaussians: GaussianModel, cameras: list[Camera], tra
     "pool_coverage" -> its direction coverage over the pool's poses, `PoolCoverageOracle`, "pool_coverage_pixels" ->
     the same weighted by the pixels each Gaussian paints in each pose (one render per pose; these three make no
     Fisher pass; the Fisher options do not apply)."""
-    if kind in ("logdet", "logdet_opacity"):
+    if kind in ("logdet", "logdet_opacity", "logdet_area"):
         return FisherOracle.build(gaussians, cameras, train_views, background, settings, fisher=fisher,
-                                  gain_weight="opacity" if kind == "logdet_opacity" else "none")
+                                  gain_weight=kind.removeprefix("logdet").removeprefix("_") or "none")
     if kind == "logdet_probes":
         augmented, _ = with_probes(gaussians, cameras, train_views, settings)
         return FisherOracle.build(augmented, cameras, train_views, background, settings, fisher=fisher)

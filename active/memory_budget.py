@@ -67,7 +67,8 @@ HEADROOM = 0.80  # a pass may take this share of the available memory; the rest 
 PASS_KINDS = ("logdet", "uncertainty", "diagonal")
 # oracle kind -> pass kind (None: no Fisher pass); render_variance holds one more [N, P, P] copy (its target) than
 # the log-det while scoring, inside HEADROOM's margin at the scale of the measurements
-ORACLE_PASSES = {"logdet": "logdet", "logdet_opacity": "logdet", "logdet_probes": "logdet", "logdet_cover": "logdet",
+ORACLE_PASSES = {"logdet": "logdet", "logdet_opacity": "logdet", "logdet_area": "logdet",
+                 "logdet_probes": "logdet", "logdet_cover": "logdet",
                  "render_variance": "logdet", "diagonal": "diagonal", "diagonal_reference": "diagonal", "coverage": None,
                  "pool_coverage": None, "pool_coverage_pixels": None}
 NO_FISHER_PASS = "use a selector without a Fisher pass (--method cover, coverage or random)"  # the CLIs' fallback

@@ -5,6 +5,7 @@ PSNR-vs-views plot. Each (method, seed) writes OUT/METHOD/seedS/loop.json."""
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import shutil
 import sys
@@ -16,6 +17,7 @@ import torch
 from experiments.method_spec import selector_from_spec
 from recommender.outputs import write_outputs
 from recommender.pipeline import candidate_cameras, load_model, make_pool, recommend
+from recommender.pipeline import log as recommend_log
 from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions, make_builtin_scene, render_rgba, scene_gaussians
 from scene.cameras import look_at
 from scene.frames import GL_TO_CV
@@ -134,6 +136,23 @@ def plot(root: Path, png: Path) -> None:
     plt.close(fig)
 
 
+class FirstNoteOnly(logging.Filter):
+    """Passes the first `note:` record and every other record: a method's advice note is printed once, not once per
+    round and seed (its text names the captured-view count, which changes every round)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.noted = False
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if not record.getMessage().startswith("note:"):
+            return True
+        if self.noted:
+            return False
+        self.noted = True
+        return True
+
+
 def run_capture_loop(args: argparse.Namespace) -> None:
     """scripts/capture_loop.py's parsed flags (`args`): only the plot of `args.plot`'s folder, or every (method, seed)
     loop into `args.output`, then the plot (`args.png`, default: psnr_vs_views.png in that folder)."""
@@ -145,8 +164,13 @@ def run_capture_loop(args: argparse.Namespace) -> None:
     for method in args.methods:
         selector_from_spec(method)  # a bad name or option: one error line before any loop runs
     for method in args.methods:
-        for seed in args.seeds:
-            run_loop(method, seed, root / method / f"seed{seed}", args)
+        once = FirstNoteOnly()
+        recommend_log.addFilter(once)
+        try:
+            for seed in args.seeds:
+                run_loop(method, seed, root / method / f"seed{seed}", args)
+        finally:
+            recommend_log.removeFilter(once)
     (root / "summary.md").write_text(summary_table(root))
     print((root / "summary.md").read_text())
     plot(root, png)

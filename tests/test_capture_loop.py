@@ -1,12 +1,13 @@
 """experiments/closed_capture_loop.py (CLI scripts/capture_loop.py): the built-in ground truth "captured" at given
 poses, and the plot of an output folder (the loop itself trains with train.py: `test_the_cli_runs_one_round`, slow)."""
 import json
+import logging
 import math
 
 import pytest
 import torch
 
-from experiments.closed_capture_loop import capture, run_capture_loop, summary_table
+from experiments.closed_capture_loop import FirstNoteOnly, capture, run_capture_loop, summary_table
 from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions
 from scene.cameras import look_at
 from scene.frames import GL_TO_CV
@@ -69,7 +70,7 @@ def test_a_bad_elevation_range_is_one_error_line(bad, tmp_path):
 @pytest.mark.slow
 def test_the_cli_runs_one_round(tmp_path):
     out = tmp_path / "loop"
-    r = run_cli(str(ROOT / "scripts" / "capture_loop.py"), "--methods", "coverage", "--seeds", "0", "-o", str(out),
+    r = run_cli(str(ROOT / "scripts" / "capture_loop.py"), "--methods", "coverage", "--seeds", "0", "1", "-o", str(out),
                 "--resolution", "16", "--num_test", "2", "--budget", "5", "-k", "2", "--candidates", "6",
                 "--iters_per_view", "10", "--max_gaussians", "500", "--png", str(tmp_path / "psnr.png"),
                 "--elevation", "10,75", timeout=600)
@@ -81,5 +82,18 @@ def test_the_cli_runs_one_round(tmp_path):
     for pick in rec["picks"]:  # the built-in scene: up = +z, centred at the origin
         x, y, z = pick["c2w"][0][3], pick["c2w"][1][3], pick["c2w"][2][3]
         assert 10 - 1e-3 <= math.degrees(math.atan2(z, math.hypot(x, y))) <= 75 + 1e-3
-    assert "| coverage | 1 |" in (out / "summary.md").read_text()
+    assert "| coverage | 2 |" in (out / "summary.md").read_text()
+    notes = [line for line in (r.stdout + r.stderr).splitlines() if line.startswith("note:")]
+    assert len(notes) == 1 and "geometric" in notes[0], notes  # the advice once per method, not once per round
     assert (tmp_path / "psnr.png").is_file()
+
+
+def test_first_note_only_passes_one_note_and_every_warning(caplog):
+    logger = logging.getLogger("test_first_note_only")
+    logger.addFilter(FirstNoteOnly())
+    with caplog.at_level(logging.WARNING, logger="test_first_note_only"):
+        for message in ("note: 3 captured views", "warning: 1 candidate sees no Gaussian", "note: 5 captured views",
+                        "warning: 2 candidates see no Gaussian"):
+            logger.warning(message)
+    assert [r.getMessage() for r in caplog.records] == ["note: 3 captured views", "warning: 1 candidate sees no Gaussian",
+                                                        "warning: 2 candidates see no Gaussian"]

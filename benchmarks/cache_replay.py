@@ -61,16 +61,23 @@ def next_requests(requests: list[Request]) -> list[float]:
 
 
 def replay(requests: list[Request], budget_bytes: int, policy: str) -> int:
-    """The Fisher passes (cache misses) of `requests` under `policy` with a cache of `budget_bytes`, mirroring
-    `FisherViewBlocks.__call__`: a miss adds the view, then views are evicted while more than one is held and the
-    bytes exceed the budget; a view larger than the budget alone turns the cache off (streaming) for the rest."""
+    """The Fisher passes (cache misses) of `requests` under `policy` with a cache of `budget_bytes`."""
+    return len(replay_misses(requests, budget_bytes, policy))
+
+
+def replay_misses(requests: list[Request], budget_bytes: int, policy: str) -> list[int]:
+    """The factor bytes of each Fisher pass (cache miss) of `requests` under `policy` with a cache of `budget_bytes`,
+    in order, mirroring `FisherViewBlocks.__call__`: a miss adds the view, then views are evicted while more than one
+    is held and the bytes exceed the budget; a view larger than the budget alone turns the cache off (streaming) for
+    the rest. A view's bytes grow with the Gaussians it sees, as its pass time does: their sum is a cost proxy."""
     if policy not in POLICIES:
         raise ValueError(f"policy must be one of {POLICIES}, got {policy!r}")
     following = next_requests(requests) if policy == "min" else []
     cache: OrderedDict[int, int] = OrderedDict()  # view -> bytes, least recently requested first
     next_use: dict[int, float] = {}  # cached view -> position of its next request (min)
     hints: dict[int, float] = {}
-    held, passes, streaming = 0, 0, False
+    held, streaming = 0, False
+    misses: list[int] = []
     for i, (kind, view, value) in enumerate(requests):
         if kind == "hint":
             hints[view] = value
@@ -80,7 +87,7 @@ def replay(requests: list[Request], budget_bytes: int, policy: str) -> int:
         if view in cache:
             cache.move_to_end(view)
             continue
-        passes += 1
+        misses.append(value)
         if streaming:
             continue
         if value > budget_bytes:
@@ -91,7 +98,7 @@ def replay(requests: list[Request], budget_bytes: int, policy: str) -> int:
         held += value
         while len(cache) > 1 and held > budget_bytes:
             held -= cache.pop(victim(cache, view, policy, hints, next_use))
-    return passes
+    return misses
 
 
 def victim(cache: OrderedDict[int, int], keep: int, policy: str, hints: dict[int, float],
@@ -127,10 +134,11 @@ class _RecordingSelector(Selector):
         return selection
 
 
-def run_rows(model_dir: str, ms: list[int], ks: list[int], settings: list[tuple[str, float | None]], verify: bool,
+def run_rows(source: dict, ms: list[int], ks: list[int], settings: list[tuple[str, float | None]], verify: bool,
              candidates: str, seed: int) -> tuple[list[dict], dict]:
-    """Record and replay every (M, setting, K); lazy_pop is run first for each M (it sizes the budget)."""
-    model = load_source({"model": model_dir})
+    """Record and replay every (M, setting, K) on `source` (`benchmarks.cost_study.load_source`'s); lazy_pop is run
+    first for each M (it sizes the budget)."""
+    model = load_source(source)
     fisher = replace(model.fisher, fisher_mode="cached", fisher_cache_mb=UNLIMITED_MB)
     rows = []
     for m in ms:
@@ -153,13 +161,15 @@ def run_rows(model_dir: str, ms: list[int], ks: list[int], settings: list[tuple[
                 t0 = time.perf_counter()
                 picks = select(recorder, k)
                 distinct = len({view for kind, view, _ in recorder.requests if kind == "get"})
-                passes = {policy: replay(recorder.requests, budget, policy) for policy in POLICIES}
+                misses = {policy: replay_misses(recorder.requests, budget, policy) for policy in POLICIES}
+                passes = {policy: len(misses[policy]) for policy in POLICIES}
                 row = {"M": m, "K": k, "selector": name, "eps": eps, "picks": picks, "budget_mb": budget / 2**20,
                        "pool_mb": sum(sizes.values()) / 2**20, "requests": sum(r[0] == "get" for r in recorder.requests),
                        "distinct_views": distinct, "unlimited_passes": recorder.fisher_passes,
                        "record_s": time.perf_counter() - t0,
                        **{f"{p}_passes": passes[p] for p in POLICIES},
-                       **{f"{p}_recomputes": passes[p] - distinct for p in POLICIES}}
+                       **{f"{p}_recomputes": passes[p] - distinct for p in POLICIES},
+                       **{f"{p}_pass_mb": sum(misses[p]) / 2**20 for p in POLICIES}}
                 if recorder.fisher_passes != distinct:
                     raise RuntimeError(f"{name} M={m} K={k}: the unlimited cache recomputed a view")
                 if verify:
@@ -178,7 +188,7 @@ def ratio(a: int, b: int) -> str:
 
 
 HEADER = ("| M | K | selector | requests | views | LRU recomputes | priority | MIN | priority / LRU | MIN / LRU | "
-          "replay = measured |\n|---|---|---|---|---|---|---|---|---|---|---|")
+          "replay = measured | MB per pass, LRU / priority |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def format_row(row: dict[str, Any]) -> str:
@@ -190,8 +200,10 @@ def format_row(row: dict[str, Any]) -> str:
             else f"no ({row['lru_measured']}, {row['priority_measured']})"
     else:
         check = "not run"
+    per_pass = (f"{row['lru_pass_mb'] / row['lru_passes']:.1f} / {row['priority_pass_mb'] / row['priority_passes']:.1f}"
+                if "lru_pass_mb" in row else "-")  # the factor bytes of a pass grow with the Gaussians it sees
     return (f"| {row['M']} | {row['K']} | {name} | {row['requests']:,} | {row['distinct_views']} | {lru:,} | {pri:,} | "
-            f"{opt:,} | {ratio(pri, lru)} | {ratio(opt, lru)} | {check} |")
+            f"{opt:,} | {ratio(pri, lru)} | {ratio(opt, lru)} | {check} | {per_pass} |")
 
 
 def report(path: Path) -> None:
@@ -208,6 +220,8 @@ def report(path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--model", help="a train.py model directory (the prior: its training views)")
+    parser.add_argument("--garden", help="instead of --model: the garden's SfM initialisation at WxH (648x420), as in "
+                        "cost_study.py")
     parser.add_argument("--ms", type=int, nargs="+", default=[100, 300], help="pool sizes")
     parser.add_argument("--ks", type=int, nargs="+", default=[3, 6])
     parser.add_argument("--selectors", nargs="+", default=["lazy_pop", "lite_gs:0.1"],
@@ -222,18 +236,21 @@ def main() -> None:
     if args.report:
         report(args.report)
         return
-    if not args.model or not Path(args.model).is_dir():
-        raise UserError(f"--model {args.model}: no such model directory (train one with train.py)")
+    if args.garden:
+        source, name = {"garden": args.garden}, f"garden {args.garden}"
+    elif not args.model or not Path(args.model).is_dir():
+        raise UserError(f"--model {args.model}: no such model directory (train one with train.py), or --garden WxH")
+    else:
+        source, name = {"model": str(Path(args.model).resolve())}, Path(args.model).resolve().name
     if min(args.ms) < max(args.ks) or min(args.ks) < 1:
         raise UserError("--ks must lie in 1..min(--ms)")
     settings = [selector_setting(text) for text in args.selectors]
     torch.set_num_threads(args.threads)
     env = environment_record(device="cpu")
     print(HEADER)
-    rows, model = run_rows(str(Path(args.model).resolve()), args.ms, args.ks, settings, args.verify, args.candidates,
-                           args.seed)
+    rows, model = run_rows(source, args.ms, args.ks, settings, args.verify, args.candidates, args.seed)
     out = args.json or RESULTS_DIR / f"cache_replay_{time.strftime('%Y%m%d_%H%M%S')}.json"
-    write_json(out, {"environment": env, "model": Path(args.model).resolve().name, **model,
+    write_json(out, {"environment": env, "model": name, **model,
                      "candidates": args.candidates, "threads": args.threads, "rows": rows})
     print(f"wrote {out}")
 

@@ -6,7 +6,7 @@ import random
 
 import pytest
 
-from benchmarks.cache_replay import POLICIES, replay
+from benchmarks.cache_replay import POLICIES, replay, replay_misses
 from tests.conftest import run_cli
 
 
@@ -58,6 +58,15 @@ def test_a_view_larger_than_the_budget_streams_the_rest():
     assert replay(as_requests([1, 1, 2, 2]) + [("get", 3, 99)] + as_requests([1, 1]), 20, "lru") == 5
 
 
+def test_misses_carry_the_bytes_of_the_views_recomputed():
+    """Views of unequal size: the priority cache keeps the large hinted view and recomputes the small one, LRU the
+    reverse; the bytes of the passes tell the two apart where the counts do not."""
+    trace = [("hint", 1, 9.0), ("hint", 2, 1.0), ("get", 1, 30), ("get", 2, 5), ("get", 3, 10),
+             ("get", 1, 30), ("get", 2, 5)]
+    assert replay_misses(trace, 40, "priority") == [30, 5, 10, 5]  # 3 evicts 2 (hint 1.0); 1 hits
+    assert replay_misses(trace, 40, "lru") == [30, 5, 10, 30, 5]  # 3 evicts 1, 1 evicts 2, 2 evicts 3
+
+
 def test_replay_counts_what_the_real_cache_counts(tiny_model, tmp_path):
     out = tmp_path / "replay.json"
     r = run_cli("benchmarks/cache_replay.py", "--model", str(tiny_model), "--ms", "8", "--ks", "1", "3", "--selectors",
@@ -69,6 +78,8 @@ def test_replay_counts_what_the_real_cache_counts(tiny_model, tmp_path):
         assert (row["lru_measured"], row["priority_measured"]) == (row["lru_passes"], row["priority_passes"]), row
         assert row["unlimited_passes"] == row["distinct_views"]
         assert row["min_passes"] <= min(row[f"{p}_passes"] for p in POLICIES), row
+        if row["selector"] == "lazy_pop":  # it computes every candidate at least once: the pool's bytes at least
+            assert all(row[f"{p}_pass_mb"] >= row["pool_mb"] * (1 - 1e-12) for p in POLICIES), row
     assert any(row["lru_recomputes"] > 0 for row in rows)  # the quarter budget made the cache recompute
     r = run_cli("benchmarks/cache_replay.py", "--report", str(out))
     assert r.returncode == 0 and "| 8 | 3 | lazy_pop |" in r.stdout, r.stderr

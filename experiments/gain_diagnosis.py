@@ -18,6 +18,7 @@ import torch
 
 from active.cover_oracle import CoverageOracle, frustum_directions, pixel_coordinates
 from active.fisher import FisherOracle, candidate_target, source_and_prior
+from active.gain_weights import area_weights
 from active.logdet import BlockInformation
 from active.variance_oracle import RenderVarianceInformation
 from arguments import FisherSettings
@@ -32,7 +33,8 @@ FAR_FACTOR = 2.0  # far: distance from the scene centre > FAR_FACTOR x the media
 def gaussian_groups(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[int],
                     prior_seen: torch.Tensor) -> dict[str, dict[str, torch.Tensor]]:
     """Boolean masks [N] per breakdown: seen by the prior or not, opacity bins, inside a captured frustum or not,
-    near or far from the centre (the mean of the Gaussian centres)."""
+    near or far from the centre (the mean of the Gaussian centres), and the quarters of the area shares
+    (`active.gain_weights.area_weights`: the densest quarter is where densification packed Gaussians)."""
     means = gaussians.means.detach().double().cpu()
     opacity = gaussians.opacities.detach().double().cpu().reshape(-1)
     inside = torch.zeros(means.shape[0], dtype=torch.bool)
@@ -41,12 +43,15 @@ def gaussian_groups(gaussians: GaussianModel, cameras: list[Camera], train_ids: 
     dist = (means - means.mean(0)).norm(dim=-1)
     far = dist > FAR_FACTOR * dist.median()
     a, b, c = OPACITY_BINS
+    area = area_weights(means)
+    low, high = torch.quantile(area, torch.tensor([0.25, 0.75], dtype=torch.float64))
     return {
         "prior": {"seen": prior_seen, "unseen": ~prior_seen},
         "opacity": {f"<{a}": opacity < a, f"{a}-{b}": (opacity >= a) & (opacity < b),
                     f"{b}-{c}": (opacity >= b) & (opacity < c), f">{c}": opacity >= c},
         "frustum": {"inside": inside, "outside": ~inside},
         "distance": {"near": ~far, "far": far},
+        "spacing": {"densest 25%": area <= low, "middle 50%": (area > low) & (area < high), "sparsest 25%": area >= high},
     }
 
 
@@ -90,13 +95,15 @@ def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[in
     prior_seen = diag_max > fisher.delta_abs * (1 + 1e-6) + 1e-300  # an all-zero prior block holds only the ridge
     groups = gaussian_groups(gaussians, cameras, train_ids, prior_seen)
     opacity = gaussians.opacities.detach().double().cpu().reshape(-1)
+    area = area_weights(gaussians.means)
     cover = CoverageOracle.for_model(gaussians, cameras, train_ids)
     rows, terms_of = [], {}
     for v in candidate_ids:
         t = per_gaussian_gains(oracle, v)
         gain = float(t.sum())
         row: dict[str, Any] = {"id": v, "name": (names or {}).get(v, str(v)), "gain": gain,
-                               "gain_opacity": float((t * opacity).sum()), "gain_cover": cover.gain(v),
+                               "gain_opacity": float((t * opacity).sum()), "gain_area": float((t * area).sum()),
+                               "gain_cover": cover.gain(v),
                                "visible": int((t > 0).sum())}
         row.update(fractions(t, groups))
         tv = per_gaussian_gains(variance, v)
@@ -135,12 +142,14 @@ def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[in
         "top1pct_share_mean": sum(r["top1pct_share"] for r in rows) / len(rows),
         "rank_correlation": {
             "logdet_vs_opacity": _rank_correlation(x, [by_id[i]["gain_opacity"] for i in ids]),
+            "logdet_vs_area": _rank_correlation(x, [by_id[i]["gain_area"] for i in ids]),
             "logdet_vs_cover": _rank_correlation(x, [by_id[i]["gain_cover"] for i in ids]),
             "opacity_vs_cover": _rank_correlation([by_id[i]["gain_opacity"] for i in ids], [by_id[i]["gain_cover"] for i in ids]),
             "logdet_vs_variance": _rank_correlation(x, [by_id[i]["gain_variance"] for i in ids]),
         },
         "top_picks": {"logdet": [by_id[i]["name"] for i in ids[:4]],
                       "opacity": [r["name"] for r in sorted(rows, key=lambda r: -r["gain_opacity"])[:4]],
+                      "area": [r["name"] for r in sorted(rows, key=lambda r: -r["gain_area"])[:4]],
                       "cover": [r["name"] for r in sorted(rows, key=lambda r: -r["gain_cover"])[:4]],
                       "render_variance": [r["name"] for r in sorted(rows, key=lambda r: -r["gain_variance"])[:4]]},
         "_top_terms": terms_of[rows[0]["id"]] if rows else None,
@@ -178,6 +187,7 @@ def markdown(d: dict[str, Any], title: str) -> str:
               f"{100 * d['top1pct_share_mean']:.1f} %", "",
               "## Rank correlation of candidates (Spearman)", "",
               f"- log-det vs opacity-weighted log-det: {rc['logdet_vs_opacity']:.3f}",
+              f"- log-det vs area-weighted log-det: {rc['logdet_vs_area']:.3f}",
               f"- log-det vs cover: {rc['logdet_vs_cover']:.3f}",
               f"- opacity-weighted vs cover: {rc['opacity_vs_cover']:.3f}",
               f"- log-det vs render variance: {rc['logdet_vs_variance']:.3f}", "",

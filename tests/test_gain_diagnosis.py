@@ -4,6 +4,7 @@ import math
 import torch
 
 from active.fisher import FisherOracle
+from active.gain_weights import area_weights
 from experiments.gain_diagnosis import diagnose, gaussian_groups, per_gaussian_gains
 from gaussian_renderer import RasterSettings
 from scene.cameras import Camera
@@ -35,18 +36,22 @@ def test_fractions_sum_to_one_and_match_brute_force():
         terms = per_gaussian_gains(oracle, row["id"])
         assert math.isclose(row["gain"], oracle.gain(row["id"]), rel_tol=1e-9)
         assert math.isclose(float(terms.sum()), row["gain"], rel_tol=1e-9)
-        for key in ("prior", "opacity", "frustum", "distance"):
+        for key in ("prior", "opacity", "frustum", "distance", "spacing"):
             assert math.isclose(sum(row[key].values()), 1.0, rel_tol=1e-9, abs_tol=1e-12), (key, row[key])
         groups = gaussian_groups(model, cams, [0], torch.ones(12, dtype=torch.bool))
-        for key in ("opacity", "frustum", "distance"):
+        for key in ("opacity", "frustum", "distance", "spacing"):
             for b, mask in groups[key].items():  # brute force: loop over Gaussians
                 brute = sum(float(terms[i]) for i in range(12) if bool(mask[i]))
                 assert math.isclose(row[key][b], brute / row["gain"], rel_tol=1e-9, abs_tol=1e-12)
     assert d["spread"]["max"] == d["candidates"][0]["gain"]
-    assert set(d["rank_correlation"]) == {"logdet_vs_opacity", "logdet_vs_cover", "opacity_vs_cover",
+    assert set(d["rank_correlation"]) == {"logdet_vs_opacity", "logdet_vs_area", "logdet_vs_cover", "opacity_vs_cover",
                                           "logdet_vs_variance"}
+    area = area_weights(model.means)
+    for row in d["candidates"]:  # the area-weighted gain: each Gaussian's term times its area share
+        terms = per_gaussian_gains(oracle, row["id"])
+        assert math.isclose(row["gain_area"], sum(float(terms[i] * area[i]) for i in range(12)), rel_tol=1e-9)
     variance = FisherOracle.build_render_variance(model, cams, [0], BG, settings)
     for row in d["candidates"]:  # the render-variance breakdown: the oracle's gain, shares summing to one
         assert math.isclose(row["gain_variance"], variance.gain(row["id"]), rel_tol=1e-9)
-        for key in ("prior", "opacity", "frustum", "distance"):
+        for key in ("prior", "opacity", "frustum", "distance", "spacing"):
             assert math.isclose(sum(row["variance"][key].values()), 1.0, rel_tol=1e-9, abs_tol=1e-12)

@@ -66,10 +66,10 @@ def replay(requests: list[Request], budget_bytes: int, policy: str) -> int:
 
 
 def replay_misses(requests: list[Request], budget_bytes: int, policy: str) -> list[int]:
-    """The factor bytes of each Fisher pass (cache miss) of `requests` under `policy` with a cache of `budget_bytes`,
-    in order, mirroring `FisherViewBlocks.__call__`: a miss adds the view, then views are evicted while more than one
-    is held and the bytes exceed the budget; a view larger than the budget alone turns the cache off (streaming) for
-    the rest. A view's bytes grow with the Gaussians it sees, as its pass time does: their sum is a cost proxy."""
+    """The view of each Fisher pass (cache miss) of `requests` under `policy` with a cache of `budget_bytes`, in
+    order, mirroring `FisherViewBlocks.__call__`: a miss adds the view, then views are evicted while more than one is
+    held and the bytes exceed the budget; a view larger than the budget alone turns the cache off (streaming) for the
+    rest. Which views are recomputed, not only how many, sets a policy's time: views differ in size and pass time."""
     if policy not in POLICIES:
         raise ValueError(f"policy must be one of {POLICIES}, got {policy!r}")
     following = next_requests(requests) if policy == "min" else []
@@ -87,7 +87,7 @@ def replay_misses(requests: list[Request], budget_bytes: int, policy: str) -> li
         if view in cache:
             cache.move_to_end(view)
             continue
-        misses.append(value)
+        misses.append(view)
         if streaming:
             continue
         if value > budget_bytes:
@@ -120,6 +120,7 @@ class _RecordingSelector(Selector):
         self.name, self.uses_oracle, self.oracle_kind = selector.name, selector.uses_oracle, selector.oracle_kind
         self.requests: list[Request] = []
         self.fisher_passes = 0
+        self.pass_seconds: dict[int, float] = {}  # view -> seconds of its (last) Fisher pass
 
     def conservative_count(self, m: int, k: int) -> int:
         return self.selector.conservative_count(m, k)
@@ -127,6 +128,15 @@ class _RecordingSelector(Selector):
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         blocks = ctx.oracle.blocks
         blocks.requests, blocks.eviction = self.requests, self.eviction
+        compute = blocks.compute
+
+        def timed_compute(view_id: int, *args: Any) -> Any:  # this benchmark's instrument: one pass's seconds
+            t0 = time.perf_counter()
+            out = compute(view_id, *args)
+            self.pass_seconds[view_id] = time.perf_counter() - t0
+            return out
+
+        blocks.compute = timed_compute
         if self.cache_bytes is not None:
             blocks.cache_bytes = self.cache_bytes
         selection = self.selector.select(ctx, k)
@@ -163,13 +173,18 @@ def run_rows(source: dict, ms: list[int], ks: list[int], settings: list[tuple[st
                 distinct = len({view for kind, view, _ in recorder.requests if kind == "get"})
                 misses = {policy: replay_misses(recorder.requests, budget, policy) for policy in POLICIES}
                 passes = {policy: len(misses[policy]) for policy in POLICIES}
+                view_bytes = {view: size for kind, view, size in recorder.requests if kind == "get"}
                 row = {"M": m, "K": k, "selector": name, "eps": eps, "picks": picks, "budget_mb": budget / 2**20,
                        "pool_mb": sum(sizes.values()) / 2**20, "requests": sum(r[0] == "get" for r in recorder.requests),
                        "distinct_views": distinct, "unlimited_passes": recorder.fisher_passes,
                        "record_s": time.perf_counter() - t0,
                        **{f"{p}_passes": passes[p] for p in POLICIES},
                        **{f"{p}_recomputes": passes[p] - distinct for p in POLICIES},
-                       **{f"{p}_pass_mb": sum(misses[p]) / 2**20 for p in POLICIES}}
+                       # the bytes and, from the unlimited run's pass of each view, the seconds of each policy's
+                       # passes: what its recomputations cost, not only how many
+                       **{f"{p}_pass_mb": sum(view_bytes[v] for v in misses[p]) / 2**20 for p in POLICIES},
+                       "unlimited_pass_s": sum(recorder.pass_seconds.values()),
+                       **{f"{p}_pass_s": sum(recorder.pass_seconds[v] for v in misses[p]) for p in POLICIES}}
                 if recorder.fisher_passes != distinct:
                     raise RuntimeError(f"{name} M={m} K={k}: the unlimited cache recomputed a view")
                 if verify:
@@ -188,7 +203,8 @@ def ratio(a: int, b: int) -> str:
 
 
 HEADER = ("| M | K | selector | requests | views | LRU recomputes | priority | MIN | priority / LRU | MIN / LRU | "
-          "replay = measured | MB per pass, LRU / priority |\n|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "replay = measured | MB per pass, LRU / priority | pass s, LRU / priority |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def format_row(row: dict[str, Any]) -> str:
@@ -201,9 +217,10 @@ def format_row(row: dict[str, Any]) -> str:
     else:
         check = "not run"
     per_pass = (f"{row['lru_pass_mb'] / row['lru_passes']:.1f} / {row['priority_pass_mb'] / row['priority_passes']:.1f}"
-                if "lru_pass_mb" in row else "-")  # the factor bytes of a pass grow with the Gaussians it sees
+                if "lru_pass_mb" in row else "-")
+    seconds = f"{row['lru_pass_s']:.1f} / {row['priority_pass_s']:.1f}" if "lru_pass_s" in row else "-"
     return (f"| {row['M']} | {row['K']} | {name} | {row['requests']:,} | {row['distinct_views']} | {lru:,} | {pri:,} | "
-            f"{opt:,} | {ratio(pri, lru)} | {ratio(opt, lru)} | {check} | {per_pass} |")
+            f"{opt:,} | {ratio(pri, lru)} | {ratio(opt, lru)} | {check} | {per_pass} | {seconds} |")
 
 
 def report(path: Path) -> None:

@@ -119,7 +119,7 @@ class _RecordingSelector(Selector):
         self.selector, self.cache_bytes, self.eviction = selector, cache_bytes, eviction
         self.name, self.uses_oracle, self.oracle_kind = selector.name, selector.uses_oracle, selector.oracle_kind
         self.requests: list[Request] = []
-        self.fisher_passes = 0
+        self.fisher_passes, self.fisher_seconds = 0, 0.0
         self.pass_seconds: dict[int, float] = {}  # view -> seconds of its (last) Fisher pass
 
     def conservative_count(self, m: int, k: int) -> int:
@@ -140,7 +140,7 @@ class _RecordingSelector(Selector):
         if self.cache_bytes is not None:
             blocks.cache_bytes = self.cache_bytes
         selection = self.selector.select(ctx, k)
-        self.fisher_passes = blocks.fisher_passes
+        self.fisher_passes, self.fisher_seconds = blocks.fisher_passes, blocks.fisher_seconds
         return selection
 
 
@@ -193,6 +193,7 @@ def run_rows(source: dict, ms: list[int], ks: list[int], settings: list[tuple[st
                         if select(real, k) != picks:
                             raise RuntimeError(f"{name} M={m} K={k}: the {policy} cache changed the picks")
                         row[f"{policy}_measured"] = real.fisher_passes
+                        row[f"{policy}_measured_s"] = real.fisher_seconds  # its Fisher seconds, the prior's included
                 rows.append(row)
                 print(format_row(row), flush=True)
     return rows, {"gaussians": model.gaussians.num_gaussians, "image": f"{pool.cameras[0].width}x{pool.cameras[0].height}"}

@@ -76,6 +76,7 @@ def test_replay_counts_what_the_real_cache_counts(tiny_model, tmp_path):
     assert len(rows) == 4
     for row in rows:
         assert (row["lru_measured"], row["priority_measured"]) == (row["lru_passes"], row["priority_passes"]), row
+        assert row["lru_measured_s"] > 0 and row["priority_measured_s"] > 0, row
         assert row["unlimited_passes"] == row["distinct_views"]
         assert row["min_passes"] <= min(row[f"{p}_passes"] for p in POLICIES), row
         if row["selector"] == "lazy_pop":  # it computes every candidate at least once: the pool's bytes at least

@@ -112,7 +112,7 @@ def check_k(k: int) -> None:
 GAIN_WEIGHTS = ("none", "opacity", "area")  # --gain_weight: how the log-det selectors weigh each Gaussian's term
 GAIN_WEIGHT_HELP = (f"log-det selectors: weight of each Gaussian's term, one of {', '.join(GAIN_WEIGHTS)} ('opacity': "
                     "by its opacity, so Gaussians that barely change a pixel count little; 'area': by the surface area "
-                    "it stands for, so a densified region does not count once per Gaussian)")
+                    "it stands for, r_8^2, so isolated Gaussians weigh most)")
 
 
 def check_gain_weight(gain_weight: str) -> str:

@@ -67,8 +67,8 @@ FISHER_PARAM_GROUPS = {  # --fisher_params: which raw parameters of a Gaussian f
     "default": ("means", "quats", "log_scales", "logit_opacities", "sh_dc"),
     "full_sh": ("means", "quats", "log_scales", "logit_opacities", "sh_dc", "sh_rest"),
 }
-ORACLE_KINDS = ("logdet", "logdet_opacity", "logdet_area", "logdet_probes", "logdet_cover", "render_variance", "diagonal",
-                "diagonal_reference", "coverage", "pool_coverage", "pool_coverage_pixels")  # build_oracle's kinds
+ORACLE_KINDS = ("logdet", "logdet_opacity", "logdet_area", "logdet_probes", "logdet_cover", "render_variance",
+                "diagonal", "diagonal_reference", "coverage", "pool_coverage", "pool_coverage_pixels")  # build_oracle's
 FACTOR_STORAGE = torch.float32  # dtype of cached view factors (the float32 accuracy test: tests/test_view_factors.py)
 
 

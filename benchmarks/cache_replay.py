@@ -60,6 +60,11 @@ def next_requests(requests: list[Request]) -> list[float]:
     return out
 
 
+def requested_bytes(requests: list[Request]) -> dict[int, int]:
+    """Each requested view's factor bytes. -> {view: bytes}"""
+    return {view: size for kind, view, size in requests if kind == "get"}
+
+
 def replay(requests: list[Request], budget_bytes: int, policy: str) -> int:
     """The Fisher passes (cache misses) of `requests` under `policy` with a cache of `budget_bytes`."""
     return len(replay_misses(requests, budget_bytes, policy))
@@ -160,7 +165,7 @@ def run_rows(source: dict, ms: list[int], ks: list[int], settings: list[tuple[st
 
         sizing = _RecordingSelector(build_selector("lazy_pop"))
         select(sizing, 1)
-        sizes = {view: size for kind, view, size in sizing.requests if kind == "get"}
+        sizes = requested_bytes(sizing.requests)
         if len(sizes) != len(pool.candidate_ids):
             raise RuntimeError(f"lazy_pop's first pick requested {len(sizes)} of {len(pool.candidate_ids)} views")
         budget = sum(sizes.values()) // 4
@@ -170,10 +175,10 @@ def run_rows(source: dict, ms: list[int], ks: list[int], settings: list[tuple[st
                 recorder = _RecordingSelector(selector)
                 t0 = time.perf_counter()
                 picks = select(recorder, k)
-                distinct = len({view for kind, view, _ in recorder.requests if kind == "get"})
+                view_bytes = requested_bytes(recorder.requests)
+                distinct = len(view_bytes)
                 misses = {policy: replay_misses(recorder.requests, budget, policy) for policy in POLICIES}
                 passes = {policy: len(misses[policy]) for policy in POLICIES}
-                view_bytes = {view: size for kind, view, size in recorder.requests if kind == "get"}
                 row = {"M": m, "K": k, "selector": name, "eps": eps, "picks": picks, "budget_mb": budget / 2**20,
                        "pool_mb": sum(sizes.values()) / 2**20, "requests": sum(r[0] == "get" for r in recorder.requests),
                        "distinct_views": distinct, "unlimited_passes": recorder.fisher_passes,

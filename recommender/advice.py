@@ -7,8 +7,9 @@ on the built-in scene): cover_pool (the default) was above random and coverage o
 level with coverage (+0.00, +0.12, +0.00); pop_gs was 1.0 dB below coverage on lego and bonsai (last in all six of
 their seeds) and 0.30 dB above it on mic, 7.7 dB below it in the capture loop. On the base model's 200-iteration
 snapshot pop_gs was 0.21 and 0.39 dB above coverage on lego and mic, 0.49 and 0.95 dB below it on bonsai and the
-built-in scene; with area-weighted terms (`--gain_weight area`) +0.38, +0.36 and -0.94 dB on lego, mic and bonsai. No statistic of the model is known that tells the Fisher's good cases apart, so the line states the
-evidence rather than a rule. With models trained on the paper's stage lengths (Setup 1, docs/results.md) the Fisher
+built-in scene; with area-weighted terms (`--gain_weight area`) +0.38, +0.36 and -0.94 dB on lego, mic and bonsai.
+No statistic of the model is known that tells the Fisher's good cases apart, so the line states the evidence rather
+than a rule. With models trained on the paper's stage lengths (Setup 1, docs/results.md) the Fisher
 selectors led on lego, mic and the built-in scene, and cover_pool on bonsai.
 """
 from __future__ import annotations

@@ -146,7 +146,10 @@ def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[in
             "logdet_vs_cover": _rank_correlation(x, [by_id[i]["gain_cover"] for i in ids]),
             "opacity_vs_cover": _rank_correlation([by_id[i]["gain_opacity"] for i in ids], [by_id[i]["gain_cover"] for i in ids]),
             "logdet_vs_variance": _rank_correlation(x, [by_id[i]["gain_variance"] for i in ids]),
+            "logdet_vs_per_visible": _rank_correlation(x, [by_id[i]["gain"] / max(by_id[i]["visible"], 1) for i in ids]),
         },
+        "visible_share": {"min": min(r["visible"] for r in rows) / gaussians.num_gaussians,
+                          "max": max(r["visible"] for r in rows) / gaussians.num_gaussians},
         "top_picks": {"logdet": [by_id[i]["name"] for i in ids[:4]],
                       "opacity": [r["name"] for r in sorted(rows, key=lambda r: -r["gain_opacity"])[:4]],
                       "area": [r["name"] for r in sorted(rows, key=lambda r: -r["gain_area"])[:4]],
@@ -190,7 +193,9 @@ def markdown(d: dict[str, Any], title: str) -> str:
               f"- log-det vs area-weighted log-det: {rc['logdet_vs_area']:.3f}",
               f"- log-det vs cover: {rc['logdet_vs_cover']:.3f}",
               f"- opacity-weighted vs cover: {rc['opacity_vs_cover']:.3f}",
-              f"- log-det vs render variance: {rc['logdet_vs_variance']:.3f}", "",
+              f"- log-det vs render variance: {rc['logdet_vs_variance']:.3f}",
+              f"- log-det vs log-det per visible Gaussian: {rc['logdet_vs_per_visible']:.3f} (a candidate sees "
+              f"{pct(d['visible_share']['min'])}-{pct(d['visible_share']['max'])} % of the Gaussians)", "",
               "Top-4 by criterion: " + "; ".join(f"{k}: {', '.join(v)}" for k, v in d["top_picks"].items()), "",
               "## Picks vs training length", "",
               "Train the same captured views for N iterations (train.py -s DATA -r 4 --eval -w -q --num_random_points "

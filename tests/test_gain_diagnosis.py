@@ -45,7 +45,13 @@ def test_fractions_sum_to_one_and_match_brute_force():
                 assert math.isclose(row[key][b], brute / row["gain"], rel_tol=1e-9, abs_tol=1e-12)
     assert d["spread"]["max"] == d["candidates"][0]["gain"]
     assert set(d["rank_correlation"]) == {"logdet_vs_opacity", "logdet_vs_area", "logdet_vs_cover", "opacity_vs_cover",
-                                          "logdet_vs_variance"}
+                                          "logdet_vs_variance", "logdet_vs_per_visible"}
+    rows = d["candidates"]  # the count check: a candidate's gain per Gaussian it sees, ranked against its gain
+    per_visible = [r["gain"] / r["visible"] for r in rows]
+    rank = lambda xs: torch.tensor(xs).argsort().argsort().double()
+    expected = torch.corrcoef(torch.stack([rank([r["gain"] for r in rows]), rank(per_visible)]))[0, 1]
+    assert math.isclose(d["rank_correlation"]["logdet_vs_per_visible"], float(expected), rel_tol=1e-9)
+    assert d["visible_share"] == {"min": min(r["visible"] for r in rows) / 12, "max": max(r["visible"] for r in rows) / 12}
     area = area_weights(model.means)
     for row in d["candidates"]:  # the area-weighted gain: each Gaussian's term times its area share
         terms = per_gaussian_gains(oracle, row["id"])

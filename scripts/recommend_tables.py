@@ -4,7 +4,8 @@
     python scripts/recommend_tables.py --write    # rewrite them (and each folder's summary.md)
 
 Each scene's table (every method in its results.json, in the order they were run) and the cross-scene comparison
-(`experiments.recommend_train_loop.compare_table`) sit in docs/recommend.md between `<!-- generated: NAME -->` and
+(`experiments.recommend_train_loop.compare_table`), and the cached-vs-streaming timing table (`modes_table`, from
+the recommendations.json files in docs/results/recommend_modes) sit in docs/recommend.md between `<!-- generated: NAME -->` and
 `<!-- end generated -->` lines; tests/test_docs_tables.py checks that they are what this script writes.
 """
 from __future__ import annotations
@@ -23,6 +24,8 @@ SCENES = (("lego", "rtt_lego_official"), ("mic", "rtt_mic_official"), ("bonsai",
 COMPARE = "rtt_compare"
 BLOCK = re.compile(r"(<!-- generated: (\S+) -->\n)(.*?)(<!-- end generated -->)", re.S)
 BASELINES = ("coverage", "cover", "random")  # the first rows of every table, then the others in the order they ran
+MODES = "recommend_modes"  # folder of recommendations.json files, MODE_SELECTOR.json: the cached-vs-streaming table
+MODE_ORDER, SELECTOR_ORDER = ("cached", "streaming"), ("lite_gs", "lazy_pop", "pop_gs")
 
 
 def scene_summary(results: dict) -> str:
@@ -33,12 +36,37 @@ def scene_summary(results: dict) -> str:
     return summary_table(results, methods, seeds)
 
 
+def modes_table(folder: Path) -> str:
+    """The cached-vs-streaming table from recommend.py's recommendations.json files named MODE_SELECTOR.json: per
+    run its oracle counts, Fisher passes, seconds and picks, and its total time over pop_gs's in the same mode."""
+    runs = {}
+    for path in sorted(folder.glob("*.json")):
+        rec = read_json(path, what="recommend.py output", fix="copy a run's recommendations.json here")
+        runs[(rec["settings"]["fisher"]["fisher_mode"], rec["selector"])] = rec
+    order = lambda key: (MODE_ORDER.index(key[0]), SELECTOR_ORDER.index(key[1]) if key[1] in SELECTOR_ORDER else 99)
+    lines = ["| Fisher mode | selector | oracles evaluated / conservative | Fisher passes | Fisher s | gain s | "
+             "**total s** | / pop_gs | picks |", "|---|---|---|---|---|---|---|---|---|"]
+    for mode, selector in sorted(runs, key=order):
+        rec, base = runs[(mode, selector)], runs.get((mode, "pop_gs"))
+        options = ", ".join(f"{k} = {v}" for k, v in rec["selector_options"].items())
+        ratio = f"{rec['seconds']['total'] / base['seconds']['total']:.2f}×" if base and selector != "pop_gs" else ""
+        calls, sec = rec["oracle_calls"], rec["seconds"]
+        lines.append(f"| {mode} | {selector}{' ' + options if options else ''} | {calls['evaluated']} / "
+                     f"{calls['conservative']} | {rec['fisher_views_computed']} | {sec['fisher']:.1f} | "
+                     f"{sec['gain']:.1f} | **{sec['total']:.1f}** | {ratio} | "
+                     f"{', '.join(str(p['candidate']) for p in rec['picks'])} |")
+    return "\n".join(lines) + "\n"
+
+
 def generated_blocks(results_dir: Path = ROOT / "docs" / "results") -> dict[str, str]:
-    """Block name -> its text: one per scene folder, and the comparison across the scenes."""
+    """Block name -> its text: one per scene folder, the comparison across the scenes, and (where its folder is
+    there) the cached-vs-streaming table."""
     results = {scene: read_json(results_dir / folder / "results.json", what="recommend-then-train results",
                                 fix="run scripts/recommend_then_train.py") for scene, folder in SCENES}
     blocks = {folder: scene_summary(results[scene]) for scene, folder in SCENES}
     blocks[COMPARE] = compare_table(results)
+    if (results_dir / MODES).is_dir():
+        blocks[MODES] = modes_table(results_dir / MODES)
     return blocks
 
 

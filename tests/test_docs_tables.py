@@ -177,3 +177,25 @@ def test_recommend_tables_change_when_a_result_changes(tmp_path):
     assert changed["rtt_bonsai"] != committed["rtt_bonsai"] and "| coverage | 12.50 |" in changed["rtt_bonsai"]
     assert changed["rtt_compare"] != committed["rtt_compare"]
     assert changed["rtt_lego_official"] == committed["rtt_lego_official"]
+
+
+def test_modes_table_rows_and_ratio_to_pop_gs(tmp_path):
+    """The cached-vs-streaming table: one row per recommendations.json, ordered by mode then selector, each total
+    over pop_gs's in the same mode."""
+    import json
+    from scripts import recommend_tables
+
+    def write(name, mode, selector, total, options=None):
+        rec = {"settings": {"fisher": {"fisher_mode": mode}}, "selector": selector, "selector_options": options or {},
+               "oracle_calls": {"evaluated": 10, "conservative": 12}, "fisher_views_computed": 7,
+               "seconds": {"fisher": 1.0, "gain": 0.5, "total": total}, "picks": [{"candidate": 3}, {"candidate": 9}]}
+        (tmp_path / name).write_text(json.dumps(rec))
+    write("a.json", "streaming", "pop_gs", 40.0)
+    write("b.json", "streaming", "lite_gs", 10.0, {"eps": 0.1})
+    write("c.json", "cached", "pop_gs", 20.0)
+    write("d.json", "cached", "lazy_pop", 15.0)
+    rows = recommend_tables.modes_table(tmp_path).splitlines()[2:]
+    assert [r.split(" | ")[:2] for r in rows] == [["| cached", "lazy_pop"], ["| cached", "pop_gs"],
+                                                  ["| streaming", "lite_gs eps = 0.1"], ["| streaming", "pop_gs"]]
+    assert "| **15.0** | 0.75× | 3, 9 |" in rows[0] and "| **10.0** | 0.25× |" in rows[2]
+    assert rows[1].endswith("| **20.0** |  | 3, 9 |")

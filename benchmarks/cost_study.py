@@ -567,39 +567,57 @@ def markdown(doc: dict) -> str:
     return "\n".join(out) + "\n"
 
 
+CACHE_STYLES = (("unlimited", "-o"), ("quarter", "--s"), ("quarter_lru", ":^"))  # plot line styles per cache
+
+
+def _ratio_lines(ratios: list[dict], model: str, over_m: bool) -> list[tuple[list, str, str]]:
+    """The lite_gs ratio curves of one model as (points, style, label): over M, one per (setting, K) with the
+    unlimited cache; over K, one per (setting, cache)."""
+    mine = [q["row"] | {"ratio": q["ratio"]} for q in ratios if q["row"]["model"] == model]
+    if over_m:
+        mine = [r for r in mine if r["cache"] == "unlimited"]
+    keys = dict.fromkeys((r["setting"], r["K"] if over_m else r["cache"]) for r in mine)
+    lines = []
+    for setting, other in keys:
+        points = sorted((r["M"] if over_m else r["K"], r["ratio"]) for r in mine
+                        if (r["setting"], r["K"] if over_m else r["cache"]) == (setting, other))
+        style = "-o" if over_m else dict(CACHE_STYLES)[other]
+        lines.append((points, style, f"{setting}, K = {other}" if over_m else f"{setting}, {other}"))
+    return lines
+
+
 def plot(rows: list[dict], path: Path) -> None:
-    """Per model: wall time against M per setting (K = 6 or the largest K; unlimited cache solid, quarter dashed),
-    and lite_gs's wall time over the faster exact method's against M (unlimited cache) per K and eps."""
+    """Per model: wall time per setting and cache, and lite_gs's wall time over the faster exact method's, against M
+    (at K = 6, or the largest K) when the rows span several pools, else against K (one pool: a K sweep)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     models = list(dict.fromkeys(r["model"] for r in rows))
-    k_plot = 6 if any(r["K"] == 6 for r in rows) else max(r["K"] for r in rows)
+    over_m = len({r["M"] for r in rows}) > 1
+    x_key, fixed_key = ("M", "K") if over_m else ("K", "M")
+    fixed = (6 if any(r["K"] == 6 for r in rows) else max(r["K"] for r in rows)) if over_m else rows[0]["M"]
     fig, axes = plt.subplots(len(models), 2, figsize=(12, 4.2 * len(models)), squeeze=False)
-    ratios = lite_ratios(rows)
+    ratios = [q for q in lite_ratios(rows) if q["row"][fixed_key] == fixed]
     settings = list(dict.fromkeys(r["setting"] for r in rows))
+    xlabel = "M candidates" if over_m else "K views per step"
     for (left, right), model in zip(axes, models):
         for colour, setting in enumerate(settings):
-            for cache, style in (("unlimited", "-o"), ("quarter", "--s")):
-                points = sorted((r["M"], r["wall_s"]) for r in rows if (r["model"], r["setting"], r["cache"], r["K"],
-                                                                          r["status"]) ==
-                                (model, setting, cache, k_plot, "ok"))
+            for cache, style in CACHE_STYLES:
+                points = sorted((r[x_key], r["wall_s"]) for r in rows if (r["model"], r["setting"], r["cache"],
+                                                                            r[fixed_key], r["status"]) ==
+                                (model, setting, cache, fixed, "ok"))
                 if points:
                     left.plot(*zip(*points), style, color=f"C{colour}", label=f"{setting}, {cache}")
-        left.set(xscale="log", yscale="log", xlabel="M candidates", ylabel="wall s (Fisher + selection)",
-                 title=f"{model}: K = {k_plot} (dashed, squares: quarter-pool cache)")
+        left.set(xscale="log", yscale="log", xlabel=xlabel, ylabel="wall s (Fisher + selection)",
+                 title=f"{model}: {fixed_key} = {fixed} (solid: unlimited cache, dashed: quarter, dotted: quarter LRU)")
         if left.lines:
             left.legend(fontsize=7)
-        for key in dict.fromkeys((q["row"]["setting"], q["row"]["K"]) for q in ratios if q["row"]["model"] == model):
-            points = sorted((q["row"]["M"], q["ratio"]) for q in ratios if (q["row"]["model"], q["row"]["setting"],
-                                                                             q["row"]["K"], q["row"]["cache"]) ==
-                            (model, *key, "unlimited"))
-            if points:
-                right.plot(*zip(*points), marker="o", label=f"{key[0]}, K = {key[1]}")
+        for points, style, label_text in _ratio_lines(ratios, model, over_m):
+            right.plot(*zip(*points), style, label=label_text)
         right.axhline(RATIO, color="k", linestyle=":", label=f"{RATIO}x")
-        right.set(xscale="log", xlabel="M candidates", ylabel="lite_gs wall / faster exact wall",
-                  title=f"{model}: unlimited cache")
+        right.set(xscale="log", xlabel=xlabel, ylabel="lite_gs wall / faster exact wall",
+                  title=f"{model}: " + ("unlimited cache" if over_m else f"M = {fixed}, every cache"))
         right.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

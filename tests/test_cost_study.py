@@ -119,3 +119,18 @@ def test_resume_runs_only_the_configurations_the_json_lacks(study, tmp_path):
     r = run_cli("benchmarks/cost_study.py", "--preset", "smoke", "--model", str(model), "--json", str(partial),
                 "--resume", "--timeout_s", "5")
     assert r.returncode == 2 and r.stderr.strip().splitlines()[-1].startswith("error: --resume:")
+
+
+def test_ratio_curves_follow_m_or_k():
+    """The plot's lite_gs curves: over M (several pools) one per (setting, K), unlimited cache only; over K (one pool)
+    one per (setting, cache), points sorted along the axis."""
+    from benchmarks.cost_study import _ratio_lines
+
+    def ratio(m, k, cache, value):
+        return {"row": {"model": "a", "setting": "lite_gs eps=0.1", "M": m, "K": k, "cache": cache}, "ratio": value}
+    sweep_k = [ratio(100, 20, "unlimited", 0.5), ratio(100, 3, "unlimited", 0.9), ratio(100, 20, "quarter", 0.3)]
+    assert _ratio_lines(sweep_k, "a", over_m=False) == [
+        ([(3, 0.9), (20, 0.5)], "-o", "lite_gs eps=0.1, unlimited"), ([(20, 0.3)], "--s", "lite_gs eps=0.1, quarter")]
+    sweep_m = [ratio(300, 6, "unlimited", 0.7), ratio(100, 6, "unlimited", 0.8), ratio(100, 6, "quarter", 0.4)]
+    assert _ratio_lines(sweep_m, "a", over_m=True) == [([(100, 0.8), (300, 0.7)], "-o", "lite_gs eps=0.1, K = 6")]
+    assert _ratio_lines(sweep_m, "b", over_m=True) == []

@@ -38,17 +38,18 @@ def scene_summary(results: dict) -> str:
 
 def modes_table(folder: Path) -> str:
     """The cached-vs-streaming table from recommend.py's recommendations.json files named MODE_SELECTOR.json: per
-    run its oracle counts, Fisher passes, seconds and picks, and its total time over pop_gs's in the same mode."""
+    run its oracle counts, distinct candidate views computed, seconds and picks, and its total time over pop_gs's in
+    the same mode. Options left at "none" are not shown."""
     runs = {}
     for path in sorted(folder.glob("*.json")):
         rec = read_json(path, what="recommend.py output", fix="copy a run's recommendations.json here")
         runs[(rec["settings"]["fisher"]["fisher_mode"], rec["selector"])] = rec
     order = lambda key: (MODE_ORDER.index(key[0]), SELECTOR_ORDER.index(key[1]) if key[1] in SELECTOR_ORDER else 99)
-    lines = ["| Fisher mode | selector | oracles evaluated / conservative | Fisher passes | Fisher s | gain s | "
+    lines = ["| Fisher mode | selector | oracles evaluated / conservative | views computed | Fisher s | gain s | "
              "**total s** | / pop_gs | picks |", "|---|---|---|---|---|---|---|---|---|"]
     for mode, selector in sorted(runs, key=order):
         rec, base = runs[(mode, selector)], runs.get((mode, "pop_gs"))
-        options = ", ".join(f"{k} = {v}" for k, v in rec["selector_options"].items())
+        options = ", ".join(f"{k} = {v}" for k, v in rec["selector_options"].items() if v != "none")  # set ones
         ratio = f"{rec['seconds']['total'] / base['seconds']['total']:.2f}×" if base and selector != "pop_gs" else ""
         calls, sec = rec["oracle_calls"], rec["seconds"]
         lines.append(f"| {mode} | {selector}{' ' + options if options else ''} | {calls['evaluated']} / "

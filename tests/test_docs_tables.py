@@ -191,7 +191,7 @@ def test_modes_table_rows_and_ratio_to_pop_gs(tmp_path):
                "seconds": {"fisher": 1.0, "gain": 0.5, "total": total}, "picks": [{"candidate": 3}, {"candidate": 9}]}
         (tmp_path / name).write_text(json.dumps(rec))
     write("a.json", "streaming", "pop_gs", 40.0)
-    write("b.json", "streaming", "lite_gs", 10.0, {"eps": 0.1})
+    write("b.json", "streaming", "lite_gs", 10.0, {"eps": 0.1, "gain_weight": "none"})
     write("c.json", "cached", "pop_gs", 20.0)
     write("d.json", "cached", "lazy_pop", 15.0)
     rows = recommend_tables.modes_table(tmp_path).splitlines()[2:]

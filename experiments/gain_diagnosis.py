@@ -132,6 +132,7 @@ def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[in
     by_id = {r["id"]: r for r in rows}
     ids = [r["id"] for r in rows]
     x = [by_id[i]["gain"] for i in ids]
+    per_visible = [by_id[i]["gain"] / max(by_id[i]["visible"], 1) for i in ids]  # the gain per Gaussian it sees
     result = {
         "num_gaussians": gaussians.num_gaussians, "num_candidates": len(rows), "train_ids": list(train_ids),
         "top": top_rows, "candidates": rows, "summary": summary, "summary_variance": summary_variance,
@@ -146,7 +147,7 @@ def diagnose(gaussians: GaussianModel, cameras: list[Camera], train_ids: list[in
             "logdet_vs_cover": _rank_correlation(x, [by_id[i]["gain_cover"] for i in ids]),
             "opacity_vs_cover": _rank_correlation([by_id[i]["gain_opacity"] for i in ids], [by_id[i]["gain_cover"] for i in ids]),
             "logdet_vs_variance": _rank_correlation(x, [by_id[i]["gain_variance"] for i in ids]),
-            "logdet_vs_per_visible": _rank_correlation(x, [by_id[i]["gain"] / max(by_id[i]["visible"], 1) for i in ids]),
+            "logdet_vs_per_visible": _rank_correlation(x, per_visible),
         },
         "visible_share": {"min": min(r["visible"] for r in rows) / gaussians.num_gaussians,
                           "max": max(r["visible"] for r in rows) / gaussians.num_gaussians},

@@ -3,10 +3,11 @@
     python scripts/recommend_tables.py            # exit 1 and name the stale tables if the docs differ
     python scripts/recommend_tables.py --write    # rewrite them (and each folder's summary.md)
 
-Each scene's table (every method in its results.json, in the order they were run) and the cross-scene comparison
-(`experiments.recommend_train_loop.compare_table`), and the cached-vs-streaming timing table (`modes_table`, from
-the recommendations.json files in docs/results/recommend_modes) sit in docs/recommend.md between `<!-- generated: NAME -->` and
-`<!-- end generated -->` lines; tests/test_docs_tables.py checks that they are what this script writes.
+Each scene's table (every method in its results.json, in the order they were run), the cross-scene comparison
+(`experiments.recommend_train_loop.compare_table`) and the cached-vs-streaming timing table (`modes_table`, from the
+recommendations.json files in docs/results/recommend_modes) sit in docs/recommend.md between
+`<!-- generated: NAME -->` and `<!-- end generated -->` lines; tests/test_docs_tables.py checks that they are what
+this script writes.
 """
 from __future__ import annotations
 
@@ -49,7 +50,7 @@ def modes_table(folder: Path) -> str:
              "**total s** | / pop_gs | picks |", "|---|---|---|---|---|---|---|---|---|"]
     for mode, selector in sorted(runs, key=order):
         rec, base = runs[(mode, selector)], runs.get((mode, "pop_gs"))
-        options = ", ".join(f"{k} = {v}" for k, v in rec["selector_options"].items() if v != "none")  # set ones
+        options = ", ".join(f"{k} = {v}" for k, v in rec["selector_options"].items() if v != "none")
         ratio = f"{rec['seconds']['total'] / base['seconds']['total']:.2f}×" if base and selector != "pop_gs" else ""
         calls, sec = rec["oracle_calls"], rec["seconds"]
         lines.append(f"| {mode} | {selector}{' ' + options if options else ''} | {calls['evaluated']} / "

@@ -576,13 +576,12 @@ def _ratio_lines(ratios: list[dict], model: str, over_m: bool) -> list[tuple[lis
     mine = [q["row"] | {"ratio": q["ratio"]} for q in ratios if q["row"]["model"] == model]
     if over_m:
         mine = [r for r in mine if r["cache"] == "unlimited"]
-    keys = dict.fromkeys((r["setting"], r["K"] if over_m else r["cache"]) for r in mine)
+    x_key, group_key = ("M", "K") if over_m else ("K", "cache")
     lines = []
-    for setting, other in keys:
-        points = sorted((r["M"] if over_m else r["K"], r["ratio"]) for r in mine
-                        if (r["setting"], r["K"] if over_m else r["cache"]) == (setting, other))
-        style = "-o" if over_m else dict(CACHE_STYLES)[other]
-        lines.append((points, style, f"{setting}, K = {other}" if over_m else f"{setting}, {other}"))
+    for setting, group in dict.fromkeys((r["setting"], r[group_key]) for r in mine):
+        points = sorted((r[x_key], r["ratio"]) for r in mine if (r["setting"], r[group_key]) == (setting, group))
+        style = "-o" if over_m else dict(CACHE_STYLES)[group]
+        lines.append((points, style, f"{setting}, K = {group}" if over_m else f"{setting}, {group}"))
     return lines
 
 
@@ -598,7 +597,7 @@ def plot(rows: list[dict], path: Path) -> None:
     x_key, fixed_key = ("M", "K") if over_m else ("K", "M")
     fixed = (6 if any(r["K"] == 6 for r in rows) else max(r["K"] for r in rows)) if over_m else rows[0]["M"]
     fig, axes = plt.subplots(len(models), 2, figsize=(12, 4.2 * len(models)), squeeze=False)
-    ratios = [q for q in lite_ratios(rows) if q["row"][fixed_key] == fixed]
+    ratios = lite_ratios(rows)
     settings = list(dict.fromkeys(r["setting"] for r in rows))
     xlabel = "M candidates" if over_m else "K views per step"
     for (left, right), model in zip(axes, models):

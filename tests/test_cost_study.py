@@ -131,6 +131,8 @@ def test_ratio_curves_follow_m_or_k():
     sweep_k = [ratio(100, 20, "unlimited", 0.5), ratio(100, 3, "unlimited", 0.9), ratio(100, 20, "quarter", 0.3)]
     assert _ratio_lines(sweep_k, "a", over_m=False) == [
         ([(3, 0.9), (20, 0.5)], "-o", "lite_gs eps=0.1, unlimited"), ([(20, 0.3)], "--s", "lite_gs eps=0.1, quarter")]
-    sweep_m = [ratio(300, 6, "unlimited", 0.7), ratio(100, 6, "unlimited", 0.8), ratio(100, 6, "quarter", 0.4)]
-    assert _ratio_lines(sweep_m, "a", over_m=True) == [([(100, 0.8), (300, 0.7)], "-o", "lite_gs eps=0.1, K = 6")]
+    sweep_m = [ratio(300, 6, "unlimited", 0.7), ratio(100, 6, "unlimited", 0.8), ratio(100, 6, "quarter", 0.4),
+               ratio(100, 3, "unlimited", 0.9)]
+    assert _ratio_lines(sweep_m, "a", over_m=True) == [([(100, 0.8), (300, 0.7)], "-o", "lite_gs eps=0.1, K = 6"),
+                                                        ([(100, 0.9)], "-o", "lite_gs eps=0.1, K = 3")]
     assert _ratio_lines(sweep_m, "b", over_m=True) == []

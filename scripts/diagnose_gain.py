@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 
 from experiments.gain_diagnosis import run
+from utils.errors import run_cli
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -22,4 +23,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_cli(main)

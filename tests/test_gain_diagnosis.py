@@ -62,3 +62,14 @@ def test_fractions_sum_to_one_and_match_brute_force():
         assert math.isclose(row["gain_variance"], variance.gain(row["id"]), rel_tol=1e-9)
         for key in ("prior", "opacity", "frustum", "distance", "spacing"):
             assert math.isclose(sum(row["variance"][key].values()), 1.0, rel_tol=1e-9, abs_tol=1e-12)
+
+
+def test_cli_missing_model_is_one_error_line(tmp_path):
+    """scripts/diagnose_gain.py with a model that does not exist: one `error:` line, exit 2, no traceback."""
+    from tests.conftest import run_cli
+    r = run_cli("scripts/diagnose_gain.py", "-m", str(tmp_path / "nothing"), "--candidates", "orbit:4", "-o",
+                str(tmp_path / "out"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip().splitlines() == [f"error: model {tmp_path / 'nothing'} does not exist: pass a train.py "
+                                             "model directory or a 3DGS .ply file"]
+    assert not (tmp_path / "out").exists()

@@ -23,6 +23,7 @@ from typing import Any
 from active.oracle_counts import exhaustive_count, mean_rounded_up
 from experiments.flags import RECORD as GRID_RECORD
 from experiments.jobs import recorded_job_seconds
+from experiments.paired import against_leader, leader_table
 from experiments.progress import STATUS as GRID_STATUS
 from utils.errors import UserError
 from utils.io import atomic_write, read_json
@@ -383,6 +384,7 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     quality, oracles, times = quality_rows(runs), oracle_rows(runs), time_rows(runs)
     per_seed = seed_rows(runs)
+    paired = against_leader(per_seed)
     digits = {"PSNR": 2, "SSIM": 4, "LPIPS": 4, "Spearman": 3, "AUSE": 4, "select": 1, "fisher": 1, "reduction": 2,
               "job": 1}
     incomplete = [r for r in runs if r.results is None]
@@ -394,6 +396,11 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
           "Test PSNR of every seed, the best of each seed in bold; first in: seeds in which the method is best on "
           "the scene (ties count for each); above random in: seeds in which it beats random's run of the same seed.",
           "", seed_tables(per_seed),
+          "## Paired differences against the best mean", "",
+          "Per scene, every method's test PSNR minus that of the method with the best mean, over the seeds both ran "
+          "(a seed shares seed views and initial points between methods, so the per-seed difference is the one to "
+          "test); 95 % Student-t interval of the mean difference; resolved: the interval excludes zero "
+          "(experiments/paired.py).", "", leader_table(paired),
           "## Oracle evaluations per acquisition step", "",
           "Averaged over steps (and seeds), rounded up, as the paper reports. conservative: every sampled candidate "
           "counts; evaluated: gains actually computed. exhaustive: what exhaustive greedy evaluates on the "
@@ -412,7 +419,8 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
         md += ["## Incomplete runs", ""] + [f"- `{r.path}`: {r.problem}" for r in incomplete] + [""]
     atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text("\n".join(md)))
 
-    tables = [("quality", quality), ("per_seed", per_seed), ("oracles", oracles), ("time", times)]
+    tables = [("quality", quality), ("per_seed", per_seed), ("paired", paired), ("oracles", oracles),
+              ("time", times)]
     columns = ["table"] + list(dict.fromkeys(c for _, rows in tables for row in rows for c in row))
 
     def write_csv(tmp: str) -> None:

@@ -135,7 +135,8 @@ def test_tables_match_numpy_and_rounded_up_counts(tmp_path):
 
     with open(tmp_path / "summary" / "summary.csv") as fh:
         rows = list(csv.DictReader(fh))
-    assert {r["table"] for r in rows} == {"quality", "per_seed", "oracles", "time"}
+    assert {r["table"] for r in rows} == {"quality", "per_seed", "paired", "oracles", "time"}
+    assert "## Paired differences against the best mean" in md
     q = next(r for r in rows if r["table"] == "quality" and r["method"] == "pop_gs K=3")
     assert abs(float(q["PSNR_mean"]) - expect["quality"][("setup1", "pop_gs K=3")][:, 0].mean()) < 1e-9
 
@@ -173,6 +174,10 @@ def test_per_seed_table_keeps_every_seed_and_counts_orderings(tmp_path):
     assert "### setup1, lego" in md and "### setup1, mic" in md
     assert "| pop_gs K=3 | **21.00** | 21.50 | **23.00** | 21.83 ± 1.04 | 2/3 | 2/3 |" in md
     assert "| lite_gs K=3 eps=0.1 | **21.00** | **22.50** | – | 21.75 ± 1.06 | 2/2 | 2/2 |" in md
+    # paired against lego's best mean (pop_gs, 21.83): lite_gs over its two seeds, (21 - 21 + 22.5 - 21.5) / 2
+    paired = {(r["scene"], r["method"].split()[0]): r for r in summarize.against_leader(summarize.seed_rows(runs))}
+    assert paired[("lego", "lite_gs")]["seeds"] == 2 and abs(paired[("lego", "lite_gs")]["diff"] - 0.5) < 1e-12
+    assert paired[("lego", "random")]["leader"] == "pop_gs K=3" and ("lego", "pop_gs") not in paired
 
 
 def test_cli_writes_outputs_and_rejects_missing_root(tmp_path):

@@ -2,9 +2,10 @@
 
 A few coloured objects made of Gaussians (a sphere, a box, a ring and a ground disc) seen from `num_train` training
 and `num_test` test cameras on a hemisphere (radius 4, looking at the origin, the NeRF-synthetic field of view).
-Deterministic for a given seed, so the README's main command needs no download.
+Deterministic for a given seed, so the README's main command needs no download. `--layout clutter` draws a new
+arrangement of seven objects for every seed instead (scene/clutter.py): scenes for held-out checks.
 
-    python -m scene.builtin data/builtin [--seed 0] [--resolution 128]
+    python -m scene.builtin data/builtin [--seed 0] [--resolution 128] [--layout clutter]
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import torch
 
 from gaussian_renderer import rasterization
 from scene.cameras import look_at
+from scene.clutter import clutter_points
 from scene.dataset_readers import GL_TO_CV
 from utils.errors import UserError, run_cli
 from utils.image import save_image
@@ -58,18 +60,33 @@ def _object_points(g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torc
     ring = torch.stack([(0.4 + 0.1 * torch.cos(b)) * torch.cos(a), 0.1 * torch.sin(b),
                         (0.4 + 0.1 * torch.cos(b)) * torch.sin(a)], 1) + torch.tensor([-0.1, 0.6, 0.55])
     add(ring, (0.1, 0.75, 0.25), 0.2, 0.04)
-    # Ground disc (checkered grey/white).
+    parts.append(_ground_disc(g))
+    means = torch.cat([q[0] for q in parts])
+    colors = torch.cat([q[1] for q in parts])
+    scales = torch.cat([q[2] for q in parts])
+    return means, colors, scales
+
+
+def _ground_disc(g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The checkered grey/white ground disc (radius 1.2) every layout stands on: centres, colours, scales."""
     n = 1500
     rad = torch.sqrt(torch.rand(n, generator=g)) * 1.2
     ang = torch.rand(n, generator=g) * 2 * math.pi
     disc = torch.stack([rad * torch.cos(ang), rad * torch.sin(ang), torch.zeros(n)], 1)
     checker = ((torch.floor(disc[:, 0] / 0.3) + torch.floor(disc[:, 1] / 0.3)) % 2 == 0)
-    add(disc[checker], (0.9, 0.9, 0.85), 0.05, 0.06)
-    add(disc[~checker], (0.35, 0.35, 0.4), 0.05, 0.06)
-    means = torch.cat([q[0] for q in parts])
-    colors = torch.cat([q[1] for q in parts])
-    scales = torch.cat([q[2] for q in parts])
-    return means, colors, scales
+    points = [disc[checker], disc[~checker]]
+    colors = [(torch.tensor(rgb) + 0.05 * (torch.rand(p.shape[0], 3, generator=g) - 0.5)).clamp(0, 1)
+              for p, rgb in zip(points, ((0.9, 0.9, 0.85), (0.35, 0.35, 0.4)))]
+    return torch.cat(points), torch.cat(colors), torch.full((n,), 0.06)
+
+
+def _clutter_layout(g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    means, colors, scales, _ = clutter_points(g)
+    disc = _ground_disc(g)
+    return torch.cat([means, disc[0]]), torch.cat([colors, disc[1]]), torch.cat([scales, disc[2]])
+
+
+LAYOUTS = {"objects": _object_points, "clutter": _clutter_layout}  # name -> generator -> centres, colours, scales
 
 
 def hemisphere_positions(count: int, offset: float) -> torch.Tensor:
@@ -81,9 +98,12 @@ def hemisphere_positions(count: int, offset: float) -> torch.Tensor:
                                         torch.cos(elevation) * torch.sin(azimuth), torch.sin(elevation)], 1)
 
 
-def scene_gaussians(seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+def scene_gaussians(seed: int, layout: str = "objects"
+                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """The scene as rasterizer inputs: means [N,3], quats [N,4], scales [N,3], opacities [N], colours [N,3]."""
-    means, colors, scales = _object_points(torch.Generator().manual_seed(seed))
+    if layout not in LAYOUTS:
+        raise UserError(f"unknown built-in layout {layout!r}; choose one of {', '.join(LAYOUTS)}")
+    means, colors, scales = LAYOUTS[layout](torch.Generator().manual_seed(seed))
     n = means.shape[0]
     quats = torch.zeros(n, 4)
     quats[:, 0] = 1
@@ -107,9 +127,9 @@ def render_rgba(viewmat: torch.Tensor, intrinsics: torch.Tensor, width: int, hei
     return torch.cat([straight, out.alpha[None]])
 
 
-def _render_splits(out: Path, seed: int, resolution: int, num_train: int, num_test: int) -> None:
+def _render_splits(out: Path, seed: int, layout: str, resolution: int, num_train: int, num_test: int) -> None:
     """Render the scene's Gaussians from every camera; write the RGBA PNGs and both transforms files."""
-    means, quats, scales3, opacities, colors = scene_gaussians(seed)
+    means, quats, scales3, opacities, colors = scene_gaussians(seed, layout)
     focal = 0.5 * resolution / math.tan(0.5 * CAMERA_ANGLE_X)
     intrinsics = torch.tensor([focal, focal, resolution / 2, resolution / 2])
     for split, count, offset in (("train", num_train, 0.5), ("test", num_test, 0.25)):
@@ -125,10 +145,14 @@ def _render_splits(out: Path, seed: int, resolution: int, num_train: int, num_te
 
 
 def make_builtin_scene(out_dir: str | Path, seed: int = 0, resolution: int = 128, num_train: int = 100,
-                       num_test: int = 25) -> Path:
+                       num_test: int = 25, layout: str = "objects") -> Path:
     """Write the dataset (skipped when `out_dir` already holds one made with the same parameters)."""
     out = Path(out_dir)
     params = {"seed": seed, "resolution": resolution, "num_train": num_train, "num_test": num_test, "version": 1}
+    if layout != "objects":  # the default layout's stamp predates layouts: it stays valid
+        params["layout"] = layout
+    if layout not in LAYOUTS:
+        raise UserError(f"--layout {layout!r}: choose one of {', '.join(LAYOUTS)}")
     if resolution < 8:
         raise UserError(f"--resolution must be at least 8 pixels, got {resolution}")
     if num_train < 1 or num_test < 1:
@@ -142,7 +166,7 @@ def make_builtin_scene(out_dir: str | Path, seed: int = 0, resolution: int = 128
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        _render_splits(out, seed, resolution, num_train, num_test)
+        _render_splits(out, seed, layout, resolution, num_train, num_test)
     finally:
         torch.set_num_threads(threads)
     write_json(stamp, params)
@@ -152,12 +176,16 @@ def make_builtin_scene(out_dir: str | Path, seed: int = 0, resolution: int = 128
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("out_dir", help="where to write the dataset")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0,
+                        help="objects: resamples the same objects' surface points; clutter: a new arrangement")
+    parser.add_argument("--layout", choices=list(LAYOUTS), default="objects",
+                        help="objects (default): sphere, box, ring on a disc, the same scene for every seed; "
+                             "clutter: seven objects drawn by the seed (scene/clutter.py), a new scene per seed")
     parser.add_argument("--resolution", type=int, default=128, help="image width and height in pixels")
     parser.add_argument("--num_train", type=int, default=100)
     parser.add_argument("--num_test", type=int, default=25)
     args = parser.parse_args()
-    out = make_builtin_scene(args.out_dir, args.seed, args.resolution, args.num_train, args.num_test)
+    out = make_builtin_scene(args.out_dir, args.seed, args.resolution, args.num_train, args.num_test, args.layout)
     print(f"built-in scene ready in {out}")
 
 

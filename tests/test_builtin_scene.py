@@ -10,7 +10,8 @@ import pytest
 import torch
 
 from gaussian_renderer import RasterSettings, rasterization
-from scene.builtin import CAMERA_ANGLE_X, CAMERA_RADIUS, STAMP, _object_points, make_builtin_scene
+from scene.builtin import CAMERA_ANGLE_X, CAMERA_RADIUS, STAMP, _object_points, make_builtin_scene, scene_gaussians
+from scene.clutter import NUM_OBJECTS, clutter_points
 from scene.dataset_readers import load_scene_info
 from tests.conftest import run_cli
 from utils.errors import UserError
@@ -95,7 +96,7 @@ def test_stamp_skips_and_regenerates(mini_scene, tmp_path):
 
 
 @pytest.mark.parametrize("kwargs, flag", [({"resolution": 4}, "--resolution"), ({"num_train": 0}, "--num_train"),
-                                          ({"num_test": 0}, "--num_test")])
+                                          ({"num_test": 0}, "--num_test"), ({"layout": "maze"}, "--layout")])
 def test_bad_arguments(tmp_path, kwargs, flag):
     with pytest.raises(UserError, match=flag):
         make_builtin_scene(tmp_path / "s", **{"resolution": 16, "num_train": 2, "num_test": 1, **kwargs})
@@ -108,3 +109,33 @@ def test_cli(mini_scene, tmp_path):
     assert ok.returncode == 0 and "ready" in ok.stdout, ok.stderr
     bad = run_cli("-m", "scene.builtin", str(tmp_path / "d"), "--resolution", "2")
     assert bad.returncode == 2 and bad.stderr.strip().startswith("error: --resolution")
+
+
+def test_clutter_layout_draws_a_new_scene_per_seed_without_overlaps():
+    """`clutter`: the seed draws the objects (kinds, places, sizes), footprints keep their gap, every kind appears."""
+    import math
+
+    layouts = [clutter_points(torch.Generator().manual_seed(seed))[3] for seed in range(40)]
+    for placed in layouts:
+        assert len(placed) == NUM_OBJECTS and {o["kind"] for o in placed} == {"sphere", "box", "ring", "column"}
+        for i, a in enumerate(placed):
+            assert math.hypot(*a["centre"]) <= 0.85
+            for b in placed[:i]:
+                assert math.dist(a["centre"], b["centre"]) > a["reach"] + b["reach"], (a, b)
+    centres = {tuple(round(c, 6) for o in placed for c in o["centre"]) for placed in layouts}
+    assert len(centres) == len(layouts)  # 40 seeds, 40 arrangements
+    # objects: the seed only resamples points of the same objects (their centroid barely moves)
+    a, b = (scene_gaussians(seed)[0].mean(0) for seed in (1, 2))
+    assert (a - b).norm() < 0.05
+    a, b = (scene_gaussians(seed, "clutter")[0].mean(0) for seed in (1, 2))
+    assert (a - b).norm() > 0.05
+
+
+def test_clutter_dataset_loads_and_stamps_its_layout(tmp_path):
+    out = make_builtin_scene(tmp_path / "c", **{**MINI, "resolution": 24}, layout="clutter")
+    assert json.loads((out / STAMP).read_text())["layout"] == "clutter"
+    info = load_scene_info(str(out))
+    assert len(info.train_cameras) == MINI["num_train"] and all(0.05 < c.image.mean() < 0.95
+                                                                 for c in info.train_cameras)
+    default = make_builtin_scene(tmp_path / "d", **MINI)
+    assert "layout" not in json.loads((default / STAMP).read_text())  # stamps written before layouts stay valid

@@ -100,3 +100,61 @@ def test_train_py_gives_the_selectors_the_camera_geometry(tiny_scene, tmp_path):
         m = stage["candidates"]
         assert stage["oracle_calls"]["conservative"] == stage["oracle_calls"]["evaluated"] == m + (m - 1)
         assert stage["fisher_views_computed"] == m and all(g > 0 for g in stage["gains"])
+
+
+def facility_written_out(points, chosen, candidates, k, space):
+    """Each pick: the candidate that lowers F(S) = sum over the pool of min(cap, nearest chosen cost) the most, the
+    lowest id on ties; cost = distance (centers, cap = the pool's diameter) or (1 - cos) / 2 (directions, cap 1)."""
+    pool = sorted(set(chosen) | set(candidates))
+
+    def cost(a, b):
+        if space == "centers":
+            return math.dist(points[a], points[b])
+        return (1.0 - sum(x * y for x, y in zip(points[a], points[b]))) / 2
+
+    cap = 1.0 if space == "directions" else max(cost(a, b) for a in pool for b in pool)
+
+    def objective(taken):
+        return sum(min([cap] + [cost(c, s) for s in taken]) for c in pool)
+    taken, picks = list(chosen), []
+    for _ in range(min(k, len(candidates))):
+        best = max((v for v in sorted(candidates) if v not in picks),
+                   key=lambda v: (objective(taken) - objective(taken + [v]), -v))
+        picks.append(best)
+        taken.append(best)
+    return picks
+
+
+@pytest.mark.parametrize("space", ["centers", "directions"])
+@pytest.mark.parametrize("seed", range(3))
+def test_facility_location_picks_equal_the_written_out_twin(seed, space):
+    from active.facility_location import facility_location_picks
+    points = torch.randn(24, 3, generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
+    if space == "directions":
+        points = points / points.norm(dim=-1, keepdim=True)
+    candidates = [v for v in range(24) if v % 5 != 2]
+    for chosen in ([2, 7], []):
+        expected = facility_written_out(points.tolist(), chosen, candidates, 5, space)
+        assert facility_location_picks(points, chosen, candidates, 5, space) == expected
+    assert sorted(facility_location_picks(points, [2], candidates, 99, space)) == sorted(candidates)
+
+
+def test_pool_objective_is_cover_pool_with_the_model_at_the_look_at_point():
+    """cover_pool's oracle over one Gaussian at the point every camera looks at, seen by every pose, is the facility
+    location over the cameras' viewing directions: the same picks."""
+    from active.pool_cover_oracle import PoolCoverageOracle
+    from active.selectors.lazy_greedy import lazy_greedy_select
+    from tests.test_fisher_cache import spiral_cameras
+    cams = spiral_cameras(30)
+    train, candidates = [0, 11, 23], [v for v in range(30) if v not in (0, 11, 23)]
+    oracle = PoolCoverageOracle(torch.zeros(1, 3, dtype=torch.float64), torch.ones(1), cams, train,
+                                inside=torch.ones(1, 30, dtype=torch.bool))
+    expected = lazy_greedy_select(candidates, 6, oracle, lambda j, pool: pool).ids
+    centers = camera_centers(torch.stack([c.viewmat for c in cams]))
+    ctx = SelectionContext(candidates, None, torch.Generator(), 0, train_ids=tuple(train), camera_centers=centers,
+                           scene_center=torch.zeros(3, dtype=torch.float64))
+    sel = build_selector("coverage", coverage_space="directions", coverage_objective="pool").select(ctx, 6)
+    assert sel.ids == expected and sel.conservative == 0
+    assert sel.ids != build_selector("coverage", coverage_space="directions").select(ctx, 6).ids  # not k-centre
+    with pytest.raises(UserError, match="--coverage_objective"):
+        build_selector("coverage", coverage_objective="median")

@@ -22,7 +22,9 @@ from utils.io import read_json
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "recommend.md"
 SCENES = (("lego", "rtt_lego_official"), ("mic", "rtt_mic_official"), ("bonsai", "rtt_bonsai"))  # scene, folder
-COMPARE = "rtt_compare"
+# Scenes no selector was designed on: the built-in scene and two `--layout clutter` scenes (scene/clutter.py)
+HELDOUT = (("built-in", "rtt_builtin_1206"), ("clutter 1", "rtt_clutter1"), ("clutter 2", "rtt_clutter2"))
+COMPARE, COMPARE_HELDOUT = "rtt_compare", "rtt_compare_heldout"
 BLOCK = re.compile(r"(<!-- generated: (\S+) -->\n)(.*?)(<!-- end generated -->)", re.S)
 BASELINES = ("coverage", "cover", "random")  # the first rows of every table, then the others in the order they ran
 MODES = "recommend_modes"  # folder of recommendations.json files, MODE_SELECTOR.json: the cached-vs-streaming table
@@ -61,12 +63,14 @@ def modes_table(folder: Path) -> str:
 
 
 def generated_blocks(results_dir: Path = ROOT / "docs" / "results") -> dict[str, str]:
-    """Block name -> its text: one per scene folder, the comparison across the scenes, and (where its folder is
-    there) the cached-vs-streaming table."""
-    results = {scene: read_json(results_dir / folder / "results.json", what="recommend-then-train results",
-                                fix="run scripts/recommend_then_train.py") for scene, folder in SCENES}
-    blocks = {folder: scene_summary(results[scene]) for scene, folder in SCENES}
-    blocks[COMPARE] = compare_table(results)
+    """Block name -> its text: one per scene folder, the comparisons across the design scenes and across the
+    held-out ones, and (where its folder is there) the cached-vs-streaming table."""
+    blocks = {}
+    for scenes, compare in ((SCENES, COMPARE), (HELDOUT, COMPARE_HELDOUT)):
+        results = {scene: read_json(results_dir / folder / "results.json", what="recommend-then-train results",
+                                    fix="run scripts/recommend_then_train.py") for scene, folder in scenes}
+        blocks.update({folder: scene_summary(results[scene]) for scene, folder in scenes})
+        blocks[compare] = compare_table(results)
     if (results_dir / MODES).is_dir():
         blocks[MODES] = modes_table(results_dir / MODES)
     return blocks
@@ -91,9 +95,9 @@ def main(argv: list[str] | None = None) -> int:
     new = splice(doc, blocks)
     if args.write:
         DOC.write_text(new)
-        for _, folder in SCENES:
+        for _, folder in SCENES + HELDOUT:
             (ROOT / "docs" / "results" / folder / "summary.md").write_text(blocks[folder])
-        print(f"wrote {DOC.relative_to(ROOT)} and {len(SCENES)} summary.md files")
+        print(f"wrote {DOC.relative_to(ROOT)} and {len(SCENES + HELDOUT)} summary.md files")
         return 0
     if new != doc:
         print("docs/recommend.md's recommend-then-train tables are stale: run python scripts/recommend_tables.py "

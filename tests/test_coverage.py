@@ -158,3 +158,16 @@ def test_pool_objective_is_cover_pool_with_the_model_at_the_look_at_point():
     assert sel.ids != build_selector("coverage", coverage_space="directions").select(ctx, 6).ids  # not k-centre
     with pytest.raises(UserError, match="--coverage_objective"):
         build_selector("coverage", coverage_objective="median")
+
+
+def test_default_objective_keeps_the_summary_label():
+    """The option added later defaults to "none", which the summaries leave out: coverage runs keep one label."""
+    from dataclasses import asdict
+
+    from active.selectors.coverage import CoverageConfig
+    from experiments.summary import Run
+    run = Run(path=None, setup="setup1", scene="lego", method="coverage", k=3, options=asdict(CoverageConfig()), seed=0)
+    assert run.setting == "coverage K=3 coverage_space=centers"
+    pool = Run(path=None, setup="setup1", scene="lego", method="coverage", k=3, seed=0,
+               options=asdict(CoverageConfig(coverage_objective="pool")))
+    assert pool.setting == "coverage K=3 coverage_objective=pool coverage_space=centers"

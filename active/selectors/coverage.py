@@ -21,7 +21,7 @@ from active.registry import register_selector
 from utils.errors import UserError
 
 SPACES = ("centers", "directions")
-OBJECTIVES = ("farthest", "pool")
+OBJECTIVES = ("none", "pool")  # none: farthest-point sampling, the selector's original criterion
 COVERAGE_SPACE_HELP = ("farthest-point sampling of camera centres, or of viewing directions on the unit sphere around "
                        "the scene centre ('directions')")
 
@@ -41,9 +41,9 @@ def coverage_points(ctx: SelectionContext, space: str) -> torch.Tensor:
 @dataclass(frozen=True)
 class CoverageConfig:
     coverage_space: str = field(default="centers", metadata={"help": COVERAGE_SPACE_HELP})
-    coverage_objective: str = field(default="farthest", metadata={
-        "help": "farthest (farthest-point sampling: the view farthest from those chosen) or pool (facility "
-                "location: the view after which the pool's views lie nearest, in sum, to a chosen one)"})
+    coverage_objective: str = field(default="none", metadata={
+        "help": "none (farthest-point sampling: the view farthest from those chosen) or pool (facility location: "
+                "the view after which the pool's views lie nearest, in sum, to a chosen one)"})
 
     def __post_init__(self) -> None:
         if self.coverage_space not in SPACES:

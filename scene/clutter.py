@@ -1,10 +1,11 @@
 """The built-in scene's `clutter` layout: a different arrangement of objects for every seed.
 
 The default layout (`objects` in scene/builtin.py) places the same four objects for every seed, only resampling
-their surface points, so it is one scene. Here the seed draws the scene itself: seven objects of four kinds
-(sphere, box, standing ring, tall column) with random sizes, hues and yaws, placed without overlap on the ground
-disc, so each seed is a scene no selector or rule was designed on (held-out checks: docs/recommend.md). Columns
-are three to four times taller than wide and hide what stands behind them from part of the hemisphere.
+their surface points, so it is one scene. Here the seed draws the scene itself: seven objects, one of each kind
+(sphere, box, standing ring, tall column) and three of kinds drawn at random, with random sizes, hues and yaws,
+placed without overlap on the ground disc, so each seed is a scene no selector or rule was designed on (held-out
+checks: docs/recommend.md). Columns are three to four times taller than wide and hide what stands behind them from
+part of the hemisphere.
 """
 from __future__ import annotations
 

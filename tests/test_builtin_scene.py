@@ -139,3 +139,13 @@ def test_clutter_dataset_loads_and_stamps_its_layout(tmp_path):
                                                                  for c in info.train_cameras)
     default = make_builtin_scene(tmp_path / "d", **MINI)
     assert "layout" not in json.loads((default / STAMP).read_text())  # stamps written before layouts stay valid
+
+
+def test_default_layout_is_the_scene_every_recorded_result_used():
+    """The `objects` layout's Gaussians for seed 0, as generated before layouts existed (sums recorded then): a change
+    here would silently change the quickstart's dataset and every built-in result."""
+    means, colors, scales = _object_points(torch.Generator().manual_seed(0))
+    assert means.shape == (4000, 3)
+    assert means.double().sum().item() == pytest.approx(1268.8504665239016, abs=1e-9)
+    assert colors.double().sum().item() == pytest.approx(5982.2797727026045, abs=1e-9)
+    assert scales.double().sum().item() == pytest.approx(203.49999964237213, abs=1e-9)

@@ -149,3 +149,6 @@ def test_default_layout_is_the_scene_every_recorded_result_used():
     assert means.double().sum().item() == pytest.approx(1268.8504665239016, abs=1e-9)
     assert colors.double().sum().item() == pytest.approx(5982.2797727026045, abs=1e-9)
     assert scales.double().sum().item() == pytest.approx(203.49999964237213, abs=1e-9)
+    # and the order: the ground disc's light squares, then its dark ones, last
+    assert means[2500].tolist() == pytest.approx([-0.101492740213871, -0.8462867140769958, 0.0], abs=1e-7)
+    assert means[-1].tolist() == pytest.approx([-0.5065761804580688, 1.0479389429092407, 0.0], abs=1e-7)

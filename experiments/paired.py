@@ -78,12 +78,11 @@ def against_leader(rows: list[dict], metric: str = "PSNR") -> list[dict]:
     return out
 
 
-def format_difference(d: PairedDifference, digits: int = 2) -> str:
-    """'+0.31 [−0.12, +0.74], 4 of 6 seeds above' (the interval only for n >= 2)."""
-    text = f"{d.mean:+.{digits}f}"
-    if d.n >= 2:
-        text += f" [{d.low:+.{digits}f}, {d.high:+.{digits}f}]"
-    return f"{text}, {d.wins} of {d.n} seeds above"
+def difference_cells(d: PairedDifference, digits: int = 2) -> list[str]:
+    """Table cells of a paired difference: seeds, mean, LEVEL interval ("–" for one seed), seeds above / below,
+    resolved."""
+    interval = "–" if d.n < 2 else f"[{d.low:+.{digits}f}, {d.high:+.{digits}f}]"
+    return [str(d.n), f"{d.mean:+.{digits}f}", interval, f"{d.wins} / {d.losses}", "yes" if d.resolved else "no"]
 
 
 def leader_table(rows: list[dict], digits: int = 2) -> str:
@@ -94,8 +93,7 @@ def leader_table(rows: list[dict], digits: int = 2) -> str:
             "seeds above / below", "resolved"]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for r in rows:
-        interval = "–" if r["seeds"] < 2 else f"[{r['low']:+.{digits}f}, {r['high']:+.{digits}f}]"
-        cells = [r["setup"], r["scene"], r["method"], r["leader"], str(r["seeds"]), f"{r['diff']:+.{digits}f}",
-                 interval, f"{r['wins']} / {r['losses']}", "yes" if r["resolved"] else "no"]
+        d = PairedDifference(r["seeds"], r["diff"], r["low"], r["high"], r["wins"], r["losses"])
+        cells = [r["setup"], r["scene"], r["method"], r["leader"]] + difference_cells(d, digits)
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -89,6 +89,11 @@ def _clutter_layout(g: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, tor
 LAYOUTS = {"objects": _object_points, "clutter": _clutter_layout}  # name -> generator -> centres, colours, scales
 
 
+def _check_layout(layout: str) -> None:
+    if layout not in LAYOUTS:
+        raise UserError(f"--layout {layout!r}: choose one of {', '.join(LAYOUTS)}")
+
+
 def hemisphere_positions(count: int, offset: float) -> torch.Tensor:
     """Camera centres spread over the upper hemisphere (elevation 10..75 degrees) by a golden-angle spiral. [V, 3]"""
     i = torch.arange(count, dtype=torch.float64) + offset
@@ -101,8 +106,7 @@ def hemisphere_positions(count: int, offset: float) -> torch.Tensor:
 def scene_gaussians(seed: int, layout: str = "objects"
                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """The scene as rasterizer inputs: means [N,3], quats [N,4], scales [N,3], opacities [N], colours [N,3]."""
-    if layout not in LAYOUTS:
-        raise UserError(f"unknown built-in layout {layout!r}; choose one of {', '.join(LAYOUTS)}")
+    _check_layout(layout)
     means, colors, scales = LAYOUTS[layout](torch.Generator().manual_seed(seed))
     n = means.shape[0]
     quats = torch.zeros(n, 4)
@@ -151,8 +155,7 @@ def make_builtin_scene(out_dir: str | Path, seed: int = 0, resolution: int = 128
     params = {"seed": seed, "resolution": resolution, "num_train": num_train, "num_test": num_test, "version": 1}
     if layout != "objects":  # the default layout's stamp predates layouts: it stays valid
         params["layout"] = layout
-    if layout not in LAYOUTS:
-        raise UserError(f"--layout {layout!r}: choose one of {', '.join(LAYOUTS)}")
+    _check_layout(layout)
     if resolution < 8:
         raise UserError(f"--resolution must be at least 8 pixels, got {resolution}")
     if num_train < 1 or num_test < 1:

@@ -16,7 +16,7 @@ import csv
 from collections import defaultdict
 from pathlib import Path
 
-from experiments.paired import LEVEL, paired_difference, seed_values
+from experiments.paired import LEVEL, difference_cells, paired_difference, seed_values
 from utils.errors import UserError, run_cli
 
 Key = tuple[str, str]  # (setup, scene)
@@ -73,9 +73,7 @@ def comparison_table(table: dict[Key, dict[str, dict[int, float]]], pairs: list[
             if la is None or lb is None or not set(settings[la]) & set(settings[lb]):
                 continue
             d = paired_difference(settings[la], settings[lb])
-            interval = "–" if d.n < 2 else f"[{d.low:+.{digits}f}, {d.high:+.{digits}f}]"
-            lines.append("| " + " | ".join([setup, scene, la, lb, str(d.n), f"{d.mean:+.{digits}f}", interval,
-                                            f"{d.wins} / {d.losses}", "yes" if d.resolved else "no"]) + " |")
+            lines.append("| " + " | ".join([setup, scene, la, lb] + difference_cells(d, digits)) + " |")
     if len(lines) == 2:
         raise UserError("no scene has both selectors of any pair on a shared seed; check the names against the "
                         "summary's method column")

@@ -24,7 +24,7 @@ from active.fisher import FISHER_PARAM_GROUPS
 from active.registry import selector_options_dataclass
 from arguments import add_config_args, config_from_args, config_to_dict
 from recommender.outputs import check_output_dir, summary_lines, write_outputs
-from recommender.pipeline import candidate_cameras, fit_memory, load_model, make_pool, recommend
+from recommender.pipeline import Recommendation, candidate_cameras, fit_memory, load_model, make_pool, recommend
 from utils.dir_lock import WAYS_OUT, writer_lock
 from utils.errors import UserError, run_cli
 from utils.model_dir import folder_lock_file
@@ -110,9 +110,15 @@ def _recommend(args: argparse.Namespace, selector, model_path: Path, out: Path, 
     for line in summary_lines(record):
         print(line)
     s, calls = record["seconds"], record["oracle_calls"]
-    print(f"{out}: {len(rec.picks)} of {len(pool.candidate_ids)} candidates with {selector.name}, oracle calls "
+    print(f"{out}: {len(rec.picks)} of {len(pool.candidate_ids)} candidates with {_selector_label(rec)}, oracle calls "
           f"{calls['evaluated']} evaluated / {calls['conservative']} conservative, {s['total']:.1f} s "
           f"(Fisher {s['fisher']:.1f} s, gains {s['gain']:.1f} s)")
+
+
+def _selector_label(rec: Recommendation) -> str:
+    """The selector's name, with the one it ran in brackets where they differ (auto)."""
+    used = rec.used.name if rec.used is not None else rec.selector.name
+    return rec.selector.name if used == rec.selector.name else f"{rec.selector.name} ({used})"
 
 
 if __name__ == "__main__":

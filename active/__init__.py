@@ -17,7 +17,7 @@ Public API: `Selector` (subclass it), `SelectionContext` (what `select` receives
 from active.base import GainOracle, Selection, SelectionContext, Selector
 from active.registry import build_selector, build_selector_from, list_selectors, register_selector, selector_options
 # importing a selector's module registers it
-from active.selectors import (cover, cover_pool, cover_pop, coverage, fisherrf, lazy_pop, lite_gs,  # noqa: F401
+from active.selectors import (auto, cover, cover_pool, cover_pop, coverage, fisherrf, lazy_pop, lite_gs,  # noqa: F401
                               novel_pop, pop_gs, probe_pop, random, render_variance, ssg)
 
 __all__ = ["GainOracle", "Selection", "SelectionContext", "Selector", "build_selector", "build_selector_from",

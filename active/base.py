@@ -93,6 +93,15 @@ class Selector:
         """The selector's options as a JSON-ready dict (empty without a config)."""
         return dataclasses.asdict(self.config) if self.config is not None else {}
 
+    def for_step(self, num_captured: int, iterations: int | None) -> Selector:
+        """The selector that runs a step with `num_captured` views taken on a model trained for `iterations` (None:
+        unknown): itself, except for a selector that chooses another by a rule (`auto`)."""
+        return self
+
+    def rule(self, num_captured: int, iterations: int | None) -> str | None:
+        """One line saying which selector `for_step` chose and why, or None for a selector that has no rule."""
+        return None
+
 
 def unscored_selection(ctx: SelectionContext, ids: list[int]) -> Selection:
     """The `Selection` of a selector that calls no gains (`uses_oracle = False`): its picks are committed to

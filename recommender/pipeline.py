@@ -149,6 +149,7 @@ def fit_memory(model: LoadedModel, pool: Pool, selector: Selector, previews: boo
     """`model.fisher` for the selection over `pool`, its Fisher pass and (with `previews`) the previews' uncertainty
     pass checked against the available memory before either starts (`active.memory_budget.fit_fisher_memory`: the
     cache lowered, or one `UserError` line naming the estimate and recommend.py's flags that help)."""
+    selector = step_selector(model, pool, selector)
     fisher, gaussians, pixels = model.fisher, model.gaussians, largest_pixels(pool.cameras)
     width, available = max(c.width for c in pool.cameras), device_available_bytes(gaussians.device)
     work = selection_work(selector.oracle_kind, gaussians, pixels, len(pool.candidate_ids), fisher.fisher_params)
@@ -163,6 +164,12 @@ def fit_memory(model: LoadedModel, pool: Pool, selector: Selector, previews: boo
         fit_fisher_memory(work, fisher, pass_label("previews' uncertainty", work, fisher.fisher_params), remedies,
                           "pass --no_previews", available)
     return fisher
+
+
+def step_selector(model: LoadedModel, pool: Pool, selector: Selector) -> Selector:
+    """The selector that runs the selection: `selector.for_step` for the pool's captured views and the model's
+    training length (itself, but for `auto`)."""
+    return selector.for_step(len(pool.train_ids), model.iteration)
 
 
 @torch.no_grad()
@@ -181,7 +188,7 @@ class Recommendation:
     """The result of `recommend`."""
 
     pool: Pool
-    selector: Selector
+    selector: Selector  # as asked for
     k: int  # requested
     picks: list[int]  # candidate ids (pool indices), in pick order
     pick_gains: list[float]
@@ -190,6 +197,8 @@ class Recommendation:
     seed: int
     notes: list[str]
     seconds: float  # visibility check + selection
+    used: Selector | None = None  # the selector that ran (`step_selector`; differs from `selector` for auto)
+    rule: str | None = None  # the line saying why `used` ran (a selector with a rule, auto), else None
 
 
 def recommend(model: LoadedModel, pool: Pool, selector: Selector, k: int, *, seed: int = 0,
@@ -215,18 +224,21 @@ def recommend(model: LoadedModel, pool: Pool, selector: Selector, k: int, *, see
         names = ", ".join(pool.names[v] for v in unseen[:5]) + (" ..." if len(unseen) > 5 else "")
         notes.append(f"warning: {len(unseen)} candidate(s) see no Gaussian (behind or inside the scene): {names}; "
                      "gain 0, never picked before a visible one")
+    used = step_selector(model, pool, selector)
+    rule = selector.rule(len(pool.train_ids), model.iteration)
     picks, gains, step = [], [], None
     if seen:
-        step = run_selection(selector, model.gaussians, pool.cameras, pool.train_ids, seen, min(k_taken, len(seen)),
+        step = run_selection(used, model.gaussians, pool.cameras, pool.train_ids, seen, min(k_taken, len(seen)),
                              model.background, model.settings, seed=seed, stage=0, fisher=model.fisher,
                              progress=progress)
         picks, gains = list(step.selection.ids), list(step.selection.gains)
     for v in unseen[:k_taken - len(picks)]:
         picks.append(v)
         gains.append(0.0)
-    advice = selection_advice(selector, len(pool.train_ids))
+    advice = rule if rule is not None else selection_advice(used, len(pool.train_ids))
     if advice is not None:
         notes.append(advice)
     for note in notes:
         log.warning(note)
-    return Recommendation(pool, selector, k, picks, gains, step, visible, seed, notes, time.perf_counter() - t0)
+    return Recommendation(pool, selector, k, picks, gains, step, visible, seed, notes, time.perf_counter() - t0,
+                          used, rule)

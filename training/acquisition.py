@@ -40,16 +40,20 @@ def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
 def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: Selector, k: int,
                   background: torch.Tensor, settings: RasterSettings) -> dict[str, Any]:
     """The training run's acquisition step: `active.acquisition.run_selection` over the training cameras not trained
-    on yet (seeded by --seed and the stage), its Fisher pass checked against the available memory first
-    (`fit_selection_memory`); returns the stage record for selection.json."""
+    on yet (seeded by --seed and the stage) by the selector `selector.for_step` chooses for this step (itself, but
+    for `auto`), its Fisher pass checked against the available memory first (`fit_selection_memory`); returns the
+    stage record for selection.json (with the rule line of a selector that has one)."""
     candidates = [v for v in range(len(scene.train_cameras)) if v not in state.train_views]
-    fisher = fit_selection_memory(cfg, selector, state.gaussians, scene.train_cameras, len(candidates))
-    step = acquisition.run_selection(selector, state.gaussians, scene.train_cameras, state.train_views, candidates, k,
+    used = selector.for_step(len(state.train_views), state.iteration)
+    fisher = fit_selection_memory(cfg, used, state.gaussians, scene.train_cameras, len(candidates))
+    step = acquisition.run_selection(used, state.gaussians, scene.train_cameras, state.train_views, candidates, k,
                                      background, settings, seed=cfg.run.seed, stage=state.stage, fisher=fisher)
     selection = step.selection
+    rule = selector.rule(len(state.train_views), state.iteration)
     return {
         "stage": state.stage,
         "iteration": state.iteration,
+        **({"selector_used": used.name, "rule": rule} if rule is not None else {}),
         "train_views": list(state.train_views),
         "candidates": len(candidates),
         "selected": [int(v) for v in selection.ids],

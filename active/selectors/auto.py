@@ -1,0 +1,85 @@
+"""`auto`: the geometric picks of cover_pool from a model trained on few views, the Fisher's (lite_gs) from a trained one.
+
+The rule, fixed from the measurements in docs/recommend.md ("auto") before auto's own runs: at an acquisition step
+with n captured views on a model trained for `it` iterations, lite_gs picks when n >= `auto_min_views` (8) and
+it / n >= `auto_min_iters_per_view` (100); cover_pool picks otherwise. A model of unknown training length (a PLY from
+another trainer) counts as trained. The step runs the chosen selector with its own oracle and its own oracle counts
+(`for_step`); `rule` is the one line that says which and why, printed by recommend.py and train.py and recorded in
+recommendations.json and selection.json.
+
+Where the thresholds come from (docs/recommend.md, "auto"): from 5 captured views trained 1,000 iterations
+(recommend-then-train) cover_pool was above coverage on lego, mic and bonsai and the Fisher last on lego and bonsai; at the
+paper's stage lengths (Setup 1: picks at 2, 5 and 8 views after 200, 700 and 1,500 iterations) the Fisher selectors
+ended above cover_pool on five of six scenes while cover_pool's models were ahead after its first picks on four; at the
+default stage lengths (10-20 iterations per view before a pick) the geometric selectors led.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from active.base import Selection, SelectionContext, Selector, check_eps
+from active.oracle_counts import exhaustive_count
+from active.registry import register_selector
+from active.selectors.cover_pool import CoverPoolSelector
+from active.selectors.lite_gs import LiteGSConfig, LiteGSSelector
+from utils.errors import UserError
+
+DEFAULT_MIN_VIEWS = 8
+DEFAULT_MIN_ITERS_PER_VIEW = 100
+
+
+@dataclass(frozen=True)
+class AutoConfig:
+    auto_min_views: int = field(default=DEFAULT_MIN_VIEWS, metadata={
+        "help": f"auto: the Fisher (lite_gs) picks from this many captured views on, an integer >= 1 (default "
+                f"{DEFAULT_MIN_VIEWS}); fewer: cover_pool"})
+    auto_min_iters_per_view: int = field(default=DEFAULT_MIN_ITERS_PER_VIEW, metadata={
+        "help": f"auto: the Fisher also needs at least this many training iterations per captured view, an "
+                f"integer >= 0 (default {DEFAULT_MIN_ITERS_PER_VIEW})"})
+    eps: float = field(default=0.1, metadata={"help": "accuracy parameter in (0, 1): guarantee 1 - exp(-(1 - eps)), "
+                                                      "about M ln(1/eps) oracles per step"})
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.auto_min_views, int) or self.auto_min_views < 1:
+            raise UserError(f"--auto_min_views must be an integer >= 1, got {self.auto_min_views!r}")
+        if not isinstance(self.auto_min_iters_per_view, int) or self.auto_min_iters_per_view < 0:
+            raise UserError(f"--auto_min_iters_per_view must be an integer >= 0, got {self.auto_min_iters_per_view!r}")
+        check_eps(self.eps)
+
+
+@register_selector("auto", config=AutoConfig)
+class AutoSelector(Selector):
+    """cover_pool or lite_gs, chosen per step by the number of captured views and the training length."""
+
+    oracle_kind = "logdet"  # the heavier branch's, for memory checks made before the step is known
+
+    def __init__(self, config: AutoConfig | None = None):
+        self.config = config if config is not None else AutoConfig()
+        self.geometric = CoverPoolSelector()
+        self.fisher = LiteGSSelector(LiteGSConfig(eps=self.config.eps))
+
+    def uses_fisher(self, num_captured: int, iterations: int | None) -> bool:
+        """The rule: enough captured views, each trained on long enough (unknown training length counts as long)."""
+        trained = iterations is None or iterations >= self.config.auto_min_iters_per_view * num_captured
+        return num_captured >= self.config.auto_min_views and trained
+
+    def for_step(self, num_captured: int, iterations: int | None) -> Selector:
+        return self.fisher if self.uses_fisher(num_captured, iterations) else self.geometric
+
+    def rule(self, num_captured: int, iterations: int | None) -> str:
+        c = self.config
+        trained = "training length unknown, taken as trained" if iterations is None else (
+            f"{iterations} iterations, {iterations / max(num_captured, 1):.0f} per view")
+        if self.uses_fisher(num_captured, iterations):
+            return (f"auto: {num_captured} captured views, {trained}: the Fisher's picks (lite_gs, eps {c.eps}), "
+                    f"as from {c.auto_min_views} views trained {c.auto_min_iters_per_view} iterations each")
+        return (f"auto: {num_captured} captured views, {trained}: at this stage of training the picks are geometric "
+                f"(cover_pool); the Fisher (lite_gs) from {c.auto_min_views} views trained "
+                f"{c.auto_min_iters_per_view} iterations each")
+
+    def conservative_count(self, m: int, k: int) -> int:
+        return exhaustive_count(m, k)  # the larger of the two branches' (cover_pool's worst case)
+
+    def select(self, ctx: SelectionContext, k: int) -> Selection:
+        raise RuntimeError("auto chooses a selector per step: call for_step(num_captured, iterations) and run that "
+                           "(active.acquisition.run_selection does)")

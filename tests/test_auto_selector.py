@@ -1,0 +1,85 @@
+"""`auto`: the rule that chooses cover_pool or lite_gs per step, its picks (those of the chosen selector, through
+recommend.py's pipeline and train.py's acquisition stage), its records and its bad-input lines."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from active import build_selector
+from recommender.candidates import generate
+from recommender.pipeline import load_model, make_pool, recommend
+from tests.conftest import run_cli
+from tests.test_recommend import EYES, _cameras_json, _cli_error, _graphdeco_ply
+
+
+@pytest.mark.parametrize("captured, iterations, expected", [
+    (5, 1000, "cover_pool"),  # recommend-then-train: 5 views, 1,000 iterations
+    (2, 200, "cover_pool"), (5, 700, "cover_pool"),  # Setup 1 with the paper's stage lengths, first two steps
+    (8, 1500, "lite_gs"),  # ... its third step
+    (8, 150, "cover_pool"),  # Setup 1 at the default stage lengths: 19 iterations per view
+    (8, 800, "lite_gs"), (8, 799, "cover_pool"), (7, 10_000, "cover_pool"),  # both thresholds at their edge
+    (8, None, "lite_gs"),  # a PLY from another trainer: training length unknown, taken as trained
+])
+def test_rule_chooses_by_captured_views_and_training_length(captured, iterations, expected):
+    auto = build_selector("auto")
+    assert auto.for_step(captured, iterations).name == expected
+    line = auto.rule(captured, iterations)
+    assert line.startswith(f"auto: {captured} captured views") and "\n" not in line
+    assert ("geometric" in line) == (expected == "cover_pool")
+
+
+def test_options_reach_the_rule_and_the_fisher_branch():
+    auto = build_selector("auto", auto_min_views=3, auto_min_iters_per_view=0, eps=0.3)
+    assert auto.for_step(3, 0).name == "lite_gs" and auto.for_step(3, 0).config.eps == 0.3
+    assert auto.for_step(2, 10**6).name == "cover_pool"
+    assert build_selector("cover_pool").rule(5, 1000) is None  # a selector without a rule
+
+
+@pytest.mark.auto_backend
+@pytest.mark.parametrize("options, branch", [({}, "cover_pool"), ({"auto_min_views": 3}, "lite_gs")])
+def test_recommend_makes_the_chosen_selectors_picks_and_says_why(tmp_path, options, branch):
+    ply = tmp_path / "splat.ply"
+    _graphdeco_ply(ply)
+    model = load_model(ply, _cameras_json(tmp_path / "cameras.json", EYES))  # 3 captured views, no iteration
+    pool = make_pool(model, generate("orbit", 8, model.captured))
+    rec = recommend(model, pool, build_selector("auto", **options), 3, seed=2)
+    ref = recommend(model, pool, build_selector(branch), 3, seed=2)
+    assert rec.used.name == branch and rec.picks == ref.picks and rec.pick_gains == ref.pick_gains
+    assert rec.acquisition.evaluated == ref.acquisition.evaluated
+    assert rec.acquisition.selection.conservative == ref.acquisition.selection.conservative
+    assert rec.rule in rec.notes and ref.rule is None
+    assert ("geometric" in rec.rule) == (branch == "cover_pool")
+
+
+def test_train_py_switches_at_the_rule_and_records_it(tiny_scene, tmp_path):
+    common = ["-s", str(tiny_scene), "--num_init_views", "2", "--views_per_step", "3", "--iters_per_view", "10",
+              "--seed", "4", "--quiet"]
+    model = tmp_path / "auto"
+    r = run_cli("train.py", *common, "-m", str(model), "--method", "auto", "--max_views", "8", "--iterations", "100",
+                "--auto_min_views", "5", "--auto_min_iters_per_view", "10")
+    assert r.returncode == 0, r.stderr
+    stages = json.loads((model / "selection.json").read_text())["stages"]
+    # step 0: 2 views after 20 iterations; step 1: 5 views after 20 + 50 = 70 iterations (14 per view)
+    assert [(s["iteration"], s["selector_used"]) for s in stages] == [(20, "cover_pool"), (70, "lite_gs")]
+    assert all(s["rule"].startswith(f"auto: {len(s['train_views'])} captured views") for s in stages)
+    ref = tmp_path / "cover_pool"
+    r = run_cli("train.py", *common, "-m", str(ref), "--method", "cover_pool", "--max_views", "5",
+                "--iterations", "60")
+    assert r.returncode == 0, r.stderr
+    ref_stage = json.loads((ref / "selection.json").read_text())["stages"][0]
+    assert stages[0]["selected"] == ref_stage["selected"] and stages[0]["oracle_calls"] == ref_stage["oracle_calls"]
+    assert "rule" not in ref_stage
+
+
+@pytest.mark.parametrize("flag, value, expected", [
+    ("--auto_min_views", "0", "--auto_min_views must be an integer >= 1, got 0"),
+    ("--auto_min_iters_per_view", "-1", "--auto_min_iters_per_view must be an integer >= 0, got -1"),
+    ("--eps", "1.5", "eps"),
+])
+def test_out_of_range_options_are_one_error_line(tmp_path, flag, value, expected):
+    ply = tmp_path / "splat.ply"
+    _graphdeco_ply(ply)
+    captured = _cameras_json(tmp_path / "cameras.json", EYES)
+    line = _cli_error(tmp_path, "-m", str(ply), "--captured", str(captured), "--method", "auto", flag, value)
+    assert expected in line

@@ -5,7 +5,6 @@ writes one PNG and returns its path, or returns None when the runs hold nothing 
 series are labelled by method and options as the runs record them."""
 from __future__ import annotations
 
-import math
 import textwrap
 from collections import defaultdict
 from pathlib import Path
@@ -18,6 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from active.oracle_counts import mean_rounded_up  # noqa: E402
+from experiments.summary import psnr_points  # noqa: E402
 
 
 def _per_step(runs, kind: str = "conservative") -> int | None:
@@ -57,12 +57,8 @@ def psnr_vs_views(runs, path: Path) -> Path | None:
     Stage points are measured before each acquisition; the last point is after the final stage."""
     curves: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
     for r in runs:
-        points = [(len(s.get("train_views", [])), s.get("test_psnr")) for s in r.stages]
-        if isinstance(r.final, dict):
-            points.append((len(r.final.get("train_views", [])), r.final.get("test_psnr")))
-        for views, value in points:
-            if isinstance(value, (int, float)) and math.isfinite(value):
-                curves[f"{r.setup}: {r.setting}"][views].append(float(value))
+        for views, value in psnr_points(r):
+            curves[f"{r.setup}: {r.setting}"][views].append(value)
     if not curves:
         return None
     means = {label: {views: mean(values) for views, values in pts.items()} for label, pts in curves.items()}

@@ -12,9 +12,11 @@ selection.json records.
 from __future__ import annotations
 
 import csv
+import math
 import re
 import shlex
 from collections import defaultdict
+from itertools import groupby
 from dataclasses import dataclass, field
 from pathlib import Path
 from statistics import mean, stdev
@@ -231,6 +233,45 @@ def seed_rows(runs: list[Run], metric: str = "PSNR") -> list[dict]:
     return rows
 
 
+def psnr_points(run: Run) -> list[tuple[int, float]]:
+    """(training views, test PSNR) of a run as it acquired: each stage's value, measured before its acquisition,
+    then the final one after the last stage; non-finite or missing values left out."""
+    points = [(len(s.get("train_views", [])), s.get("test_psnr")) for s in run.stages]
+    if isinstance(run.final, dict):
+        points.append((len(run.final.get("train_views", [])), run.final.get("test_psnr")))
+    return [(views, float(value)) for views, value in points
+            if isinstance(value, (int, float)) and math.isfinite(value)]
+
+
+def views_rows(runs: list[Run]) -> list[dict]:
+    """Setup x scene x method setting: test PSNR mean and std over seeds at each number of training views
+    (columns views_<N>), from the runs' stage records (`psnr_points`): where along the acquisition a selector gains
+    or loses, which the final value alone does not say. Complete runs only, as in the other tables."""
+    groups: dict[tuple, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
+    for r in (r for r in runs if r.results is not None):
+        for views, value in psnr_points(r):
+            groups[(r.setup, r.scene, r.setting)][views].append(value)
+    rows = []
+    for (setup, scene, setting), by_views in sorted(groups.items()):
+        row = {"setup": setup, "scene": scene, "method": setting}
+        for views in sorted(by_views):
+            row[f"views_{views}_mean"], row[f"views_{views}_std"] = mean_std(by_views[views])
+        rows.append(row)
+    return rows
+
+
+def views_tables(rows: list[dict]) -> str:
+    """`views_rows` as one markdown table per setup and scene (their view counts differ), mean ± std per cell."""
+    parts = []
+    for (setup, scene), group in groupby(rows, key=lambda row: (row["setup"], row["scene"])):
+        group = list(group)
+        counts = sorted({int(c.split("_")[1]) for row in group for c in row if c.endswith("_mean")})
+        cells = [{"method": row["method"], **{f"{n} views_mean": row.get(f"views_{n}_mean") for n in counts},
+                  **{f"{n} views_std": row.get(f"views_{n}_std") for n in counts}} for row in group]
+        parts.append(f"### {setup}, {scene}\n\n" + markdown_table(cells, {}))
+    return "\n".join(parts) if parts else "(none)\n"
+
+
 def seed_tables(rows: list[dict], digits: int = 2) -> str:
     """`seed_rows` as one markdown table per setup and scene, the best value of each seed in bold."""
     parts = []
@@ -396,6 +437,10 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
           "Test PSNR of every seed, the best of each seed in bold; first in: seeds in which the method is best on "
           "the scene (ties count for each); above random in: seeds in which it beats random's run of the same seed.",
           "", seed_tables(per_seed),
+          "## Test PSNR along the acquisition", "",
+          "Mean ± std over seeds at each number of training views: the stage values are measured just before each "
+          "acquisition (so the value at N views shows the picks that brought the run to N), the last after the "
+          "final stage.", "", views_tables(views_rows(runs)),
           "## Paired differences against the best mean", "",
           "Per scene, every method's test PSNR minus that of the method with the best mean, over the seeds both ran "
           "(a seed shares seed views and initial points between methods, so the per-seed difference is the one to "
@@ -419,8 +464,8 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
         md += ["## Incomplete runs", ""] + [f"- `{r.path}`: {r.problem}" for r in incomplete] + [""]
     atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text("\n".join(md)))
 
-    tables = [("quality", quality), ("per_seed", per_seed), ("paired", paired), ("oracles", oracles),
-              ("time", times)]
+    tables = [("quality", quality), ("per_seed", per_seed), ("views", views_rows(runs)), ("paired", paired),
+              ("oracles", oracles), ("time", times)]
     columns = ["table"] + list(dict.fromkeys(c for _, rows in tables for row in rows for c in row))
 
     def write_csv(tmp: str) -> None:

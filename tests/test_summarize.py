@@ -135,7 +135,7 @@ def test_tables_match_numpy_and_rounded_up_counts(tmp_path):
 
     with open(tmp_path / "summary" / "summary.csv") as fh:
         rows = list(csv.DictReader(fh))
-    assert {r["table"] for r in rows} == {"quality", "per_seed", "paired", "oracles", "time"}
+    assert {r["table"] for r in rows} == {"quality", "per_seed", "views", "paired", "oracles", "time"}
     assert "## Paired differences against the best mean" in md
     q = next(r for r in rows if r["table"] == "quality" and r["method"] == "pop_gs K=3")
     assert abs(float(q["PSNR_mean"]) - expect["quality"][("setup1", "pop_gs K=3")][:, 0].mean()) < 1e-9
@@ -267,3 +267,19 @@ def test_an_unfinished_run_is_reported_with_its_last_progress_not_as_running(tmp
                        "last progress recorded at 2026-12-03 14:20:22)")
     (model / "run_status.json").unlink()
     assert summarize.load_run(model).problem == "no results.json (no run_status.json, 1 step(s) done)"
+
+
+def test_views_table_averages_each_view_count_over_the_complete_seeds(tmp_path):
+    """views_rows: stage values (before each acquisition) and the final one, keyed by the training-view count,
+    mean and sample std over the complete runs only; one markdown table per setup and scene."""
+    for seed in (0, 1, 2):  # stages at 2 and 5 views (10 and 11 dB), final at 8 views (20 + seed dB)
+        make_run(tmp_path / "out", "setup1", "lego", "pop_gs", seed, "pop_gs", 3, 0.1, [(4, 4), (3, 3)],
+                 None if seed == 2 else (21.0, 0.8, 0.2))  # seed 2 unfinished: left out
+    runs = summarize.find_runs([str(tmp_path / "out")])
+    (row,) = summarize.views_rows(runs)
+    assert (row["scene"], row["method"]) == ("lego", "pop_gs K=3")
+    assert (row["views_2_mean"], row["views_5_mean"], row["views_8_mean"]) == (10.0, 11.0, 20.5)
+    assert row["views_2_std"] == 0.0 and abs(row["views_8_std"] - math.sqrt(0.5)) < 1e-12
+    md = summarize.views_tables(summarize.views_rows(runs))
+    assert "### setup1, lego" in md and "| method | 2 views | 5 views | 8 views |" in md
+    assert "| pop_gs K=3 | 10.00 ± 0.00 | 11.00 ± 0.00 | 20.50 ± 0.71 |" in md

@@ -40,9 +40,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--candidates", default="orbit:64", help="orbit:N, hemisphere:N, unused, or a pose file "
                                                             "(default: orbit:64)")
     p.add_argument("-k", type=int, default=4, help="views to recommend (default: 4)")
-    p.add_argument("--method", default="cover_pool", help=f"selector, one of {', '.join(list_selectors())} "
-                   "(default: cover_pool, geometric: from 5 captured views above random and coverage on lego, mic "
-                   "and bonsai in recommend-then-train, first in the capture loop; docs/recommend.md)")
+    p.add_argument("--method", default="auto", help=f"selector, one of {', '.join(list_selectors())} "
+                   "(default: auto = cover_pool's geometric picks until 8 captured views trained 100 iterations "
+                   "each, lite_gs's Fisher picks after; prints which and why; docs/recommend.md)")
     p.add_argument("-o", "--output", help="output folder (default: MODEL/recommend, or beside the PLY)")
     p.add_argument("--iteration", type=int, default=-1, help="model directory: saved iteration (default: last)")
     p.add_argument("--seed", type=int, default=0, help="selection seed (default: 0)")

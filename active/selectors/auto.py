@@ -1,4 +1,4 @@
-"""`auto`: the geometric picks of cover_pool from a model trained on few views, the Fisher's (lite_gs) from a trained one.
+"""`auto`: cover_pool's geometric picks from a model trained on few views, the Fisher's (lite_gs) from a trained one.
 
 The rule, fixed from the measurements in docs/recommend.md ("auto") before auto's own runs: at an acquisition step
 with n captured views on a model trained for `it` iterations, lite_gs picks when n >= `auto_min_views` (8) and
@@ -8,10 +8,10 @@ another trainer) counts as trained. The step runs the chosen selector with its o
 recommendations.json and selection.json.
 
 Where the thresholds come from (docs/recommend.md, "auto"): from 5 captured views trained 1,000 iterations
-(recommend-then-train) cover_pool was above coverage on lego, mic and bonsai and the Fisher last on lego and bonsai; at the
-paper's stage lengths (Setup 1: picks at 2, 5 and 8 views after 200, 700 and 1,500 iterations) the Fisher selectors
-ended above cover_pool on five of six scenes while cover_pool's models were ahead after its first picks on four; at the
-default stage lengths (10-20 iterations per view before a pick) the geometric selectors led.
+(recommend-then-train) cover_pool was above coverage on lego, mic and bonsai and the Fisher last on lego and bonsai;
+with the paper's stage lengths (Setup 1: picks at 2, 5 and 8 views after 200, 700 and 1,500 iterations) the Fisher
+selectors ended above cover_pool on most scenes while cover_pool's runs were ahead after its first picks on lego and
+the clutter scenes; at the default stage lengths (10-20 iterations per view before a pick) the geometry led.
 """
 from __future__ import annotations
 

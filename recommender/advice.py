@@ -1,16 +1,16 @@
 """What the measurements say about a selector's picks, as one line for recommendations.json and stdout.
 
-The measured facts behind it (docs/recommend.md, 2026-12-05/06; recommend-then-train: 5 captured views, 4 picks,
-3 seeds, the official lego and mic and Mip-NeRF 360 bonsai, and the built-in scene held out; the closed capture loop
-on the built-in scene): cover_pool (what the default, auto, runs there) was above random and coverage on all three
-(vs coverage: +0.90, +0.13, +0.2 dB), 0.15 dB below coverage on the built-in scene, and first at 9 views in the
-capture loop; cover was level with coverage (+0.00, +0.12, +0.00); pop_gs was 1.0 dB below coverage on lego and
-bonsai (last in all six of their seeds) and 0.30 dB above it on mic, 7.7 dB below it in the capture loop. On the base model's 200-iteration
-snapshot pop_gs was 0.21 and 0.39 dB above coverage on lego and mic, 0.49 and 0.95 dB below it on bonsai and the
-built-in scene; with area-weighted terms (`--gain_weight area`) +0.38, +0.36 and -0.94 dB on lego, mic and bonsai.
-Held out (two `--layout clutter` scenes of scene.builtin, seeds 1 and 2): cover_pool +0.79 and +0.62 dB over
-coverage, pop_gs -0.16 and +0.42. No statistic of the model is known that tells the Fisher's good cases apart, so
-the line states the evidence rather than a rule. With models trained on the paper's stage lengths (Setup 1,
+The measured facts behind it (docs/recommend.md, 2026-12-05/06; recommend-then-train: 5 captured views, 4 picks, 3
+seeds, the official lego and mic and Mip-NeRF 360 bonsai, and the built-in scene held out; the closed capture loop on
+the built-in scene): cover_pool (what the default, auto, runs there) was above random and coverage on all three (vs
+coverage: +0.90, +0.13, +0.2 dB), 0.15 dB below coverage on the built-in scene, and first at 9 views in the capture
+loop; cover was level with coverage (+0.00, +0.12, +0.00); pop_gs was 1.0 dB below coverage on lego and bonsai (last
+in all six of their seeds) and 0.30 dB above it on mic, 7.7 dB below it in the capture loop. On the base model's
+200-iteration snapshot pop_gs was 0.21 and 0.39 dB above coverage on lego and mic, 0.49 and 0.95 dB below it on
+bonsai and the built-in scene; with area-weighted terms (`--gain_weight area`) +0.38, +0.36 and -0.94 dB on lego, mic
+and bonsai. Held out (two `--layout clutter` scenes of scene.builtin, seeds 1 and 2): cover_pool +0.79 and +0.62 dB
+over coverage, pop_gs -0.16 and +0.42. No statistic of the model is known that tells the Fisher's good cases apart,
+so the line states the evidence rather than a rule. With models trained on the paper's stage lengths (Setup 1,
 docs/results.md) the Fisher selectors led on lego, mic and the built-in scene (on lego and mic by 0.16 dB over
 coverage with six seeds, inside the seed spread), and cover_pool on bonsai.
 """

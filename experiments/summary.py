@@ -16,8 +16,8 @@ import math
 import re
 import shlex
 from collections import defaultdict
-from itertools import groupby
 from dataclasses import dataclass, field
+from itertools import groupby
 from pathlib import Path
 from statistics import mean, stdev
 from typing import Any

@@ -80,6 +80,7 @@ class Selector:
     uses_oracle: bool = True  # False: `select` calls no gains (it still commits its picks when given an oracle)
     oracle_kind: str = "logdet"  # which oracle `ctx.oracle` is: "logdet" (GainOracle) or "diagonal" (DiagonalOracle)
     config: Any = None  # the options dataclass instance, for selectors registered with one
+    delegates: bool = False  # True: every step is run by the selector `for_step` returns, never by `select` (auto)
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         """Choose min(k, M) views of `ctx.candidate_ids`."""

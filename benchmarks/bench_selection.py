@@ -101,7 +101,8 @@ def main() -> None:
     parser.add_argument("--sweep", nargs="+", default=["eps=0.1,0.3,0.6"],
                         help="NAME=V1,V2,...: values of a selector option to run (for the selectors that declare it)")
     parser.add_argument("--num_init_views", type=int, default=2)
-    oracle_selectors = [name for name in list_selectors() if build_selector(name).uses_oracle]
+    oracle_selectors = [name for name in list_selectors()  # auto delegates to cover_pool or lite_gs, both listed
+                        if (s := build_selector(name)).uses_oracle and not s.delegates]
     parser.add_argument("--methods", nargs="+", choices=oracle_selectors, default=oracle_selectors)
     parser.add_argument("--num_candidates", type=int, default=0,
                         help="use only the first N candidates (0 = all); for peak-memory scaling")

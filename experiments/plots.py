@@ -17,7 +17,6 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from active.oracle_counts import mean_rounded_up  # noqa: E402
-from experiments.summary import psnr_points  # noqa: E402
 
 
 def _per_step(runs, kind: str = "conservative") -> int | None:
@@ -57,7 +56,7 @@ def psnr_vs_views(runs, path: Path) -> Path | None:
     Stage points are measured before each acquisition; the last point is after the final stage."""
     curves: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
     for r in runs:
-        for views, value in psnr_points(r):
+        for views, value in r.psnr_points():
             curves[f"{r.setup}: {r.setting}"][views].append(value)
     if not curves:
         return None

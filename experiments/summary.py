@@ -61,6 +61,15 @@ class Run:
         return " ".join(f"{name}={value:g}" if isinstance(value, float) else f"{name}={value}"
                         for name, value in sorted(self.options.items()) if value != "none")
 
+    def psnr_points(self) -> list[tuple[int, float]]:
+        """(training views, test PSNR) as the run acquired: each stage's value, measured before its acquisition,
+        then the final one after the last stage; non-finite or missing values left out."""
+        points = [(len(s.get("train_views", [])), s.get("test_psnr")) for s in self.stages]
+        if isinstance(self.final, dict):
+            points.append((len(self.final.get("train_views", [])), self.final.get("test_psnr")))
+        return [(views, float(value)) for views, value in points
+                if isinstance(value, (int, float)) and math.isfinite(value)]
+
     @property
     def setting(self) -> str:
         """Method label with the settings that vary within a setup: K and the selector's options."""
@@ -233,23 +242,13 @@ def seed_rows(runs: list[Run], metric: str = "PSNR") -> list[dict]:
     return rows
 
 
-def psnr_points(run: Run) -> list[tuple[int, float]]:
-    """(training views, test PSNR) of a run as it acquired: each stage's value, measured before its acquisition,
-    then the final one after the last stage; non-finite or missing values left out."""
-    points = [(len(s.get("train_views", [])), s.get("test_psnr")) for s in run.stages]
-    if isinstance(run.final, dict):
-        points.append((len(run.final.get("train_views", [])), run.final.get("test_psnr")))
-    return [(views, float(value)) for views, value in points
-            if isinstance(value, (int, float)) and math.isfinite(value)]
-
-
 def views_rows(runs: list[Run]) -> list[dict]:
     """Setup x scene x method setting: test PSNR mean and std over seeds at each number of training views
-    (columns views_<N>), from the runs' stage records (`psnr_points`): where along the acquisition a selector gains
+    (columns views_<N>), from the runs' stage records (`Run.psnr_points`): where along the acquisition a selector gains
     or loses, which the final value alone does not say. Complete runs only, as in the other tables."""
     groups: dict[tuple, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
     for r in (r for r in runs if r.results is not None):
-        for views, value in psnr_points(r):
+        for views, value in r.psnr_points():
             groups[(r.setup, r.scene, r.setting)][views].append(value)
     rows = []
     for (setup, scene, setting), by_views in sorted(groups.items()):

@@ -34,6 +34,9 @@ def test_options_reach_the_rule_and_the_fisher_branch():
     assert auto.for_step(3, 0).name == "lite_gs" and auto.for_step(3, 0).config.eps == 0.3
     assert auto.for_step(2, 10**6).name == "cover_pool"
     assert build_selector("cover_pool").rule(5, 1000) is None  # a selector without a rule
+    assert auto.delegates and not build_selector("cover_pool").delegates
+    with pytest.raises(RuntimeError, match="for_step"):  # never run by itself: its oracle kind depends on the step
+        auto.select(None, 3)
 
 
 @pytest.mark.auto_backend

@@ -43,8 +43,7 @@ def run(method, blocks, k, seed=0, ids=None, **options):
 
 # Selectors asking for the log-det oracle (the others have their own tests: test_fisherrf.py, test_coverage.py).
 # selectors that run themselves on the log-det oracle (auto runs another: tests/test_auto_selector.py)
-LOGDET_SELECTORS = [m for m in list_selectors()
-                    if (s := build_selector(m)).oracle_kind == "logdet" and s.for_step(2, None) is s]
+LOGDET_SELECTORS = [m for m in list_selectors() if (s := build_selector(m)).oracle_kind == "logdet" and not s.delegates]
 
 
 def rho_dense(blocks, subsets):

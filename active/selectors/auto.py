@@ -52,6 +52,7 @@ class AutoSelector(Selector):
     """cover_pool or lite_gs, chosen per step by the number of captured views and the training length."""
 
     oracle_kind = "logdet"  # the heavier branch's, for memory checks made before the step is known
+    delegates = True
 
     def __init__(self, config: AutoConfig | None = None):
         self.config = config if config is not None else AutoConfig()

@@ -117,8 +117,8 @@ def _recommend(args: argparse.Namespace, selector, model_path: Path, out: Path, 
 
 def _selector_label(rec: Recommendation) -> str:
     """The selector's name, with the one it ran in brackets where they differ (auto)."""
-    used = rec.used.name if rec.used is not None else rec.selector.name
-    return rec.selector.name if used == rec.selector.name else f"{rec.selector.name} ({used})"
+    asked, used = rec.selector.name, rec.used.name
+    return asked if used == asked else f"{asked} ({used})"
 
 
 if __name__ == "__main__":

@@ -423,7 +423,7 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
 
     out.mkdir(parents=True, exist_ok=True)
     quality, oracles, times = quality_rows(runs), oracle_rows(runs), time_rows(runs)
-    per_seed = seed_rows(runs)
+    per_seed, views = seed_rows(runs), views_rows(runs)
     paired = against_leader(per_seed)
     digits = {"PSNR": 2, "SSIM": 4, "LPIPS": 4, "Spearman": 3, "AUSE": 4, "select": 1, "fisher": 1, "reduction": 2,
               "job": 1}
@@ -439,7 +439,7 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
           "## Test PSNR along the acquisition", "",
           "Mean ± std over seeds at each number of training views: the stage values are measured just before each "
           "acquisition (so the value at N views shows the picks that brought the run to N), the last after the "
-          "final stage.", "", views_tables(views_rows(runs)),
+          "final stage.", "", views_tables(views),
           "## Paired differences against the best mean", "",
           "Per scene, every method's test PSNR minus that of the method with the best mean, over the seeds both ran "
           "(a seed shares seed views and initial points between methods, so the per-seed difference is the one to "
@@ -463,7 +463,7 @@ def write_outputs(runs: list[Run], out: Path) -> list[Path]:
         md += ["## Incomplete runs", ""] + [f"- `{r.path}`: {r.problem}" for r in incomplete] + [""]
     atomic_write(out / "summary.md", lambda tmp: Path(tmp).write_text("\n".join(md)))
 
-    tables = [("quality", quality), ("per_seed", per_seed), ("views", views_rows(runs)), ("paired", paired),
+    tables = [("quality", quality), ("per_seed", per_seed), ("views", views), ("paired", paired),
               ("oracles", oracles), ("time", times)]
     columns = ["table"] + list(dict.fromkeys(c for _, rows in tables for row in rows for c in row))
 

@@ -76,7 +76,7 @@ def recommendation_record(rec: Recommendation, model: LoadedModel, candidates_sp
         "candidates": {"source": candidates_spec, "count": len(pool.candidate_ids),
                        "visible": sum(1 for v in pool.candidate_ids if rec.visible[v] > 0)},
         "selector": rec.selector.name, "selector_options": rec.selector.options(),
-        "selector_used": (rec.used or rec.selector).name, "rule": rec.rule,
+        "selector_used": rec.used.name, "rule": rec.rule,
         "k": rec.k, "k_taken": len(rec.picks),
         "picks": picks,
         "candidate_gains": candidates,

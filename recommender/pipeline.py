@@ -197,8 +197,8 @@ class Recommendation:
     seed: int
     notes: list[str]
     seconds: float  # visibility check + selection
-    used: Selector | None = None  # the selector that ran (`step_selector`; differs from `selector` for auto)
-    rule: str | None = None  # the line saying why `used` ran (a selector with a rule, auto), else None
+    used: Selector  # the selector that ran (`step_selector`; differs from `selector` for auto)
+    rule: str | None  # the line saying why `used` ran (a selector with a rule, auto), else None
 
 
 def recommend(model: LoadedModel, pool: Pool, selector: Selector, k: int, *, seed: int = 0,

@@ -80,7 +80,7 @@ class Selector:
     uses_oracle: bool = True  # False: `select` calls no gains (it still commits its picks when given an oracle)
     oracle_kind: str = "logdet"  # which oracle `ctx.oracle` is: "logdet" (GainOracle) or "diagonal" (DiagonalOracle)
     config: Any = None  # the options dataclass instance, for selectors registered with one
-    delegates: bool = False  # True: every step is run by the selector `for_step` returns, never by `select` (auto)
+    delegates: bool = False  # True: every step is run by the selector `for_step` chooses, never by `select` (auto)
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         """Choose min(k, M) views of `ctx.candidate_ids`."""
@@ -94,14 +94,19 @@ class Selector:
         """The selector's options as a JSON-ready dict (empty without a config)."""
         return dataclasses.asdict(self.config) if self.config is not None else {}
 
-    def for_step(self, num_captured: int, iterations: int | None) -> Selector:
+    def for_step(self, num_captured: int, iterations: int | None) -> StepChoice:
         """The selector that runs a step with `num_captured` views taken on a model trained for `iterations` (None:
-        unknown): itself, except for a selector that chooses another by a rule (`auto`)."""
-        return self
+        unknown), with the line saying why: itself and no line, except for a selector with a rule (`auto`)."""
+        return StepChoice(self)
 
-    def rule(self, num_captured: int, iterations: int | None) -> str | None:
-        """One line saying which selector `for_step` chose and why, or None for a selector that has no rule."""
-        return None
+
+@dataclass(frozen=True)
+class StepChoice:
+    """What `Selector.for_step` returns: the selector that runs the step and, for a selector that chooses another by
+    a rule, the one line saying which and why (printed by train.py and recommend.py, recorded in their JSON)."""
+
+    selector: Selector
+    rule: str | None = None
 
 
 def unscored_selection(ctx: SelectionContext, ids: list[int]) -> Selection:

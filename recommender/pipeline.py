@@ -22,7 +22,7 @@ from pathlib import Path
 import torch
 
 from active.acquisition import Acquisition, run_selection
-from active.base import Selector
+from active.base import Selector, StepChoice
 from active.fisher import FISHER_PARAM_GROUPS
 from active.memory_budget import (NO_FISHER_PASS, FisherWork, block_size, device_available_bytes, fit_fisher_memory,
                                   largest_pixels, pass_label, selection_work, smaller_passes)
@@ -149,7 +149,7 @@ def fit_memory(model: LoadedModel, pool: Pool, selector: Selector, previews: boo
     """`model.fisher` for the selection over `pool`, its Fisher pass and (with `previews`) the previews' uncertainty
     pass checked against the available memory before either starts (`active.memory_budget.fit_fisher_memory`: the
     cache lowered, or one `UserError` line naming the estimate and recommend.py's flags that help)."""
-    selector = step_selector(model, pool, selector)
+    selector = step_selector(model, pool, selector).selector
     fisher, gaussians, pixels = model.fisher, model.gaussians, largest_pixels(pool.cameras)
     width, available = max(c.width for c in pool.cameras), device_available_bytes(gaussians.device)
     work = selection_work(selector.oracle_kind, gaussians, pixels, len(pool.candidate_ids), fisher.fisher_params)
@@ -166,9 +166,9 @@ def fit_memory(model: LoadedModel, pool: Pool, selector: Selector, previews: boo
     return fisher
 
 
-def step_selector(model: LoadedModel, pool: Pool, selector: Selector) -> Selector:
-    """The selector that runs the selection: `selector.for_step` for the pool's captured views and the model's
-    training length (itself, but for `auto`)."""
+def step_selector(model: LoadedModel, pool: Pool, selector: Selector) -> StepChoice:
+    """The selector that runs the selection and its rule line: `selector.for_step` for the pool's captured views and
+    the model's training length (itself and no line, but for `auto`)."""
     return selector.for_step(len(pool.train_ids), model.iteration)
 
 
@@ -224,8 +224,8 @@ def recommend(model: LoadedModel, pool: Pool, selector: Selector, k: int, *, see
         names = ", ".join(pool.names[v] for v in unseen[:5]) + (" ..." if len(unseen) > 5 else "")
         notes.append(f"warning: {len(unseen)} candidate(s) see no Gaussian (behind or inside the scene): {names}; "
                      "gain 0, never picked before a visible one")
-    used = step_selector(model, pool, selector)
-    rule = selector.rule(len(pool.train_ids), model.iteration)
+    choice = step_selector(model, pool, selector)
+    used, rule = choice.selector, choice.rule
     picks, gains, step = [], [], None
     if seen:
         step = run_selection(used, model.gaussians, pool.cameras, pool.train_ids, seen, min(k_taken, len(seen)),

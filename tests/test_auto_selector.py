@@ -3,13 +3,16 @@ recommend.py's pipeline and train.py's acquisition stage), its records and its b
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import pytest
 
 from active import build_selector
+from active.base import StepChoice
 from recommender.candidates import generate
 from recommender.pipeline import load_model, make_pool, recommend
 from tests.conftest import run_cli
+from training.acquisition import model_iterations
 from tests.test_recommend import EYES, _cameras_json, _cli_error, _graphdeco_ply
 
 
@@ -22,18 +25,19 @@ from tests.test_recommend import EYES, _cameras_json, _cli_error, _graphdeco_ply
     (8, None, "lite_gs"),  # a PLY from another trainer: training length unknown, taken as trained
 ])
 def test_rule_chooses_by_captured_views_and_training_length(captured, iterations, expected):
-    auto = build_selector("auto")
-    assert auto.for_step(captured, iterations).name == expected
-    line = auto.rule(captured, iterations)
+    choice = build_selector("auto").for_step(captured, iterations)
+    line = choice.rule
+    assert choice.selector.name == expected
     assert line.startswith(f"auto: {captured} captured views") and "\n" not in line
     assert ("geometric" in line) == (expected == "cover_pool")
 
 
 def test_options_reach_the_rule_and_the_fisher_branch():
     auto = build_selector("auto", auto_min_views=3, auto_min_iters_per_view=0, eps=0.3)
-    assert auto.for_step(3, 0).name == "lite_gs" and auto.for_step(3, 0).config.eps == 0.3
-    assert auto.for_step(2, 10**6).name == "cover_pool"
-    assert build_selector("cover_pool").rule(5, 1000) is None  # a selector without a rule
+    assert auto.for_step(3, 0).selector.name == "lite_gs" and auto.for_step(3, 0).selector.config.eps == 0.3
+    assert auto.for_step(2, 10**6).selector.name == "cover_pool"
+    cover_pool = build_selector("cover_pool")
+    assert cover_pool.for_step(5, 1000) == StepChoice(cover_pool, None)  # a selector without a rule runs itself
     assert auto.delegates and not build_selector("cover_pool").delegates
     with pytest.raises(RuntimeError, match="for_step"):  # never run by itself: its oracle kind depends on the step
         auto.select(None, 3)
@@ -53,6 +57,16 @@ def test_recommend_makes_the_chosen_selectors_picks_and_says_why(tmp_path, optio
     assert rec.acquisition.selection.conservative == ref.acquisition.selection.conservative
     assert rec.rule in rec.notes and ref.rule is None
     assert ("geometric" in rec.rule) == (branch == "cover_pool")
+
+
+@pytest.mark.parametrize("stage_reset, expected", [(False, 700), (True, 500)])
+def test_the_rule_counts_the_iterations_of_the_current_model(stage_reset, expected):
+    """With --stage_reset the model starts afresh at each acquisition: only the iterations since the last one count."""
+    state = SimpleNamespace(iteration=700, stages=[{"iteration": 200}])
+    cfg = SimpleNamespace(active=SimpleNamespace(stage_reset=stage_reset))
+    assert model_iterations(state, cfg) == expected
+    first = SimpleNamespace(iteration=200, stages=[])  # before the first acquisition: every iteration
+    assert model_iterations(first, cfg) == 200
 
 
 def test_train_py_switches_at_the_rule_and_records_it(tiny_scene, tmp_path):

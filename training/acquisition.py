@@ -44,16 +44,16 @@ def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: S
     for `auto`), its Fisher pass checked against the available memory first (`fit_selection_memory`); returns the
     stage record for selection.json (with the rule line of a selector that has one)."""
     candidates = [v for v in range(len(scene.train_cameras)) if v not in state.train_views]
-    used = selector.for_step(len(state.train_views), state.iteration)
+    choice = selector.for_step(len(state.train_views), model_iterations(state, cfg))
+    used = choice.selector
     fisher = fit_selection_memory(cfg, used, state.gaussians, scene.train_cameras, len(candidates))
     step = acquisition.run_selection(used, state.gaussians, scene.train_cameras, state.train_views, candidates, k,
                                      background, settings, seed=cfg.run.seed, stage=state.stage, fisher=fisher)
     selection = step.selection
-    rule = selector.rule(len(state.train_views), state.iteration)
     return {
         "stage": state.stage,
         "iteration": state.iteration,
-        **({"selector_used": used.name, "rule": rule} if rule is not None else {}),
+        **({"selector_used": used.name, "rule": choice.rule} if choice.rule is not None else {}),
         "train_views": list(state.train_views),
         "candidates": len(candidates),
         "selected": [int(v) for v in selection.ids],
@@ -64,6 +64,14 @@ def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: S
         "select_seconds": step.seconds,
         "test_psnr": test_psnr(state.gaussians, scene.test_cameras, background, settings),
     }
+
+
+def model_iterations(state: TrainState, cfg: TrainConfig) -> int:
+    """How long the current model has trained: since the last acquisition with --stage_reset (which starts the model
+    afresh there), else since the run started."""
+    if cfg.active.stage_reset and state.stages:
+        return state.iteration - state.stages[-1]["iteration"]
+    return state.iteration
 
 
 TRAINING_BYTES_PER_FLOAT = 16  # a float32 parameter, its gradient and Adam's two moments

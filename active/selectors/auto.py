@@ -1,10 +1,11 @@
 """`auto`: cover_pool's geometric picks from a model trained on few views, the Fisher's (lite_gs) from a trained one.
 
 The rule, fixed from the measurements in docs/recommend.md ("auto") before auto's own runs: at an acquisition step
-with n captured views on a model trained for `it` iterations, lite_gs picks when n >= `auto_min_views` (8) and
+with n captured views on a model trained for `it` iterations (since the last acquisition under train.py's
+--stage_reset, which starts the model afresh there), lite_gs picks when n >= `auto_min_views` (8) and
 it / n >= `auto_min_iters_per_view` (100); cover_pool picks otherwise. A model of unknown training length (a PLY from
 another trainer) counts as trained. The step runs the chosen selector with its own oracle and its own oracle counts
-(`for_step`); `rule` is the one line that says which and why, printed by recommend.py and train.py and recorded in
+(`for_step`), with the one line that says which and why, printed by recommend.py and train.py and recorded in
 recommendations.json and selection.json.
 
 Where the thresholds come from (docs/recommend.md, "auto"): from 5 captured views trained 1,000 iterations
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from active.base import Selection, SelectionContext, Selector, check_eps
+from active.base import Selection, SelectionContext, Selector, StepChoice, check_eps
 from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
 from active.selectors.cover_pool import CoverPoolSelector
@@ -64,23 +65,22 @@ class AutoSelector(Selector):
         trained = iterations is None or iterations >= self.config.auto_min_iters_per_view * num_captured
         return num_captured >= self.config.auto_min_views and trained
 
-    def for_step(self, num_captured: int, iterations: int | None) -> Selector:
-        return self.fisher if self.uses_fisher(num_captured, iterations) else self.geometric
-
-    def rule(self, num_captured: int, iterations: int | None) -> str:
+    def for_step(self, num_captured: int, iterations: int | None) -> StepChoice:
         c = self.config
         trained = "training length unknown, taken as trained" if iterations is None else (
             f"{iterations} iterations, {iterations / max(num_captured, 1):.0f} per view")
         if self.uses_fisher(num_captured, iterations):
-            return (f"auto: {num_captured} captured views, {trained}: the Fisher's picks (lite_gs, eps {c.eps}), "
-                    f"as from {c.auto_min_views} views trained {c.auto_min_iters_per_view} iterations each")
-        return (f"auto: {num_captured} captured views, {trained}: at this stage of training the picks are geometric "
-                f"(cover_pool); the Fisher (lite_gs) from {c.auto_min_views} views trained "
-                f"{c.auto_min_iters_per_view} iterations each")
+            return StepChoice(self.fisher, f"auto: {num_captured} captured views, {trained}: the Fisher's picks "
+                                           f"(lite_gs, eps {c.eps}), as from {c.auto_min_views} views trained "
+                                           f"{c.auto_min_iters_per_view} iterations each")
+        return StepChoice(self.geometric, f"auto: {num_captured} captured views, {trained}: at this stage of training "
+                                          f"the picks are geometric (cover_pool); the Fisher (lite_gs) from "
+                                          f"{c.auto_min_views} views trained {c.auto_min_iters_per_view} iterations "
+                                          f"each")
 
     def conservative_count(self, m: int, k: int) -> int:
         return exhaustive_count(m, k)  # the larger of the two branches' (cover_pool's worst case)
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
-        raise RuntimeError("auto chooses a selector per step: call for_step(num_captured, iterations) and run that "
-                           "(active.acquisition.run_selection does)")
+        raise RuntimeError("auto chooses a selector per step: call for_step(num_captured, iterations) and run its "
+                           "selector (active.acquisition.run_selection does)")

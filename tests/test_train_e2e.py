@@ -43,6 +43,8 @@ def test_active_run_is_deterministic_and_counts_exactly(tiny_scene, tmp_path):
     a, b = runs
     assert [s["selected"] for s in a["stages"]] == [s["selected"] for s in b["stages"]]
     assert a["final"]["test_psnr"] == b["final"]["test_psnr"]
+    assert [s["train_psnr"] for s in a["stages"]] == [s["train_psnr"] for s in b["stages"]]  # the fit when choosing
+    assert all(5 < s["train_psnr"] < 60 for s in a["stages"])
     assert [len(s["train_views"]) for s in a["stages"]] == [2, 5]
     assert a["final"]["train_views"][:2] == a["stages"][0]["train_views"]
     for stage in a["stages"]:

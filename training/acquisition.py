@@ -20,7 +20,7 @@ from scene.gaussian_model import GaussianModel
 from scene.scene import Scene
 from training.config import TrainConfig
 from training.state import TrainState
-from training.step import test_psnr
+from training.step import mean_psnr
 from utils.errors import UserError
 
 
@@ -62,7 +62,9 @@ def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: S
         "fisher_views_computed": step.fisher_views_computed,
         "fisher_seconds": step.fisher_seconds,
         "select_seconds": step.seconds,
-        "test_psnr": test_psnr(state.gaussians, scene.test_cameras, background, settings),
+        "train_psnr": mean_psnr(state.gaussians, [scene.train_cameras[v] for v in state.train_views], background,
+                                settings),  # how well the model fits its captured views when it chooses
+        "test_psnr": mean_psnr(state.gaussians, scene.test_cameras, background, settings),
     }
 
 

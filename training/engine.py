@@ -30,7 +30,7 @@ from training.acquisition import acquire_views, check_memory_before_training, se
 from training.config import TrainConfig, default_model_path, make_selector
 from training.optim import PositionLRSchedule
 from training.state import TrainState, capture_state, fresh_state, restore_state
-from training.step import next_view, test_psnr, training_step
+from training.step import mean_psnr, next_view, training_step
 from training.time_estimate import RunTimeEstimator
 from utils import dir_lock
 from utils.checkpoint import RunDirectory
@@ -163,7 +163,7 @@ def train_stage(run: Run, progress: tqdm) -> None:
             progress.set_postfix(loss=f"{loss.item():.4f}", psnr=f"{train_psnr.item():.2f}",
                                  gaussians=state.gaussians.num_gaussians, views=len(state.train_views))
         if state.iteration in run_cfg.test_iterations:
-            value = test_psnr(state.gaussians, run.scene.test_cameras, run.background, run.settings)
+            value = mean_psnr(state.gaussians, run.scene.test_cameras, run.background, run.settings)
             progress.write(f"[iter {state.iteration}] test PSNR {value:.2f} dB" if value is not None
                            else f"[iter {state.iteration}] no test views (use --eval)")
         if state.iteration in save_its:
@@ -196,7 +196,7 @@ def acquire(run: Run, progress: tqdm) -> None:
 def finish(run: Run) -> None:
     """Final test PSNR, the final selection record and run_status.json "complete"."""
     state = run.state
-    final_psnr = test_psnr(state.gaussians, run.scene.test_cameras, run.background, run.settings)
+    final_psnr = mean_psnr(state.gaussians, run.scene.test_cameras, run.background, run.settings)
     if run.selector is not None:
         write_selection(run, final={"iteration": state.iteration, "train_views": state.train_views,
                                     "test_psnr": final_psnr})

@@ -50,7 +50,7 @@ def next_view(state: TrainState, rng: random.Random) -> int:
 
 
 @torch.no_grad()
-def test_psnr(gaussians: GaussianModel, cameras: list[Camera], background: torch.Tensor,
+def mean_psnr(gaussians: GaussianModel, cameras: list[Camera], background: torch.Tensor,
               settings: RasterSettings) -> float | None:
     """Mean PSNR over `cameras` (None when there are none)."""
     if not cameras:

@@ -1,0 +1,97 @@
+"""How well each model fitted its captured views when it chose, for grid runs made before selection.json recorded it.
+
+    python scripts/selection_fit.py output/paper_stages_6seeds/setup1/mic/cover_pool/seed0 ... [--json rows.json]
+
+For every run directory: the first acquisition's model is trained again from the run's logged train.py command
+(`ROOT/SETUP/logs/SCENE/METHOD/SEEDn.log`, written by scripts/grid.py) up to that acquisition, in a temporary
+directory; the later acquisitions' models are the stage checkpoints the run kept. For each, the mean PSNR over the
+views captured at that acquisition (train fit) and over the test views; the replayed test PSNR must equal the run's
+recorded stage value (the same machine replays the same floats), or the script stops. New runs record the train fit
+themselves (selection.json, stage `train_psnr`).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import tempfile
+from pathlib import Path
+
+import torch
+from tqdm import tqdm
+
+from training.config import parse_config
+from training.engine import close_run, open_run, train_stage
+from training.state import fresh_state, restore_state
+from training.step import mean_psnr
+from utils.errors import UserError, run_cli
+
+REPLAY_TOLERANCE_DB = 1e-3
+
+
+def logged_argv(run_dir: Path) -> list[str]:
+    """The train.py arguments scripts/grid.py logged for `run_dir` (ROOT/SETUP/SCENE/METHOD/SEED)."""
+    setup_dir, scene, method, seed = run_dir.parents[2], run_dir.parents[1].name, run_dir.parent.name, run_dir.name
+    log = setup_dir / "logs" / scene / method / f"{seed}.log"
+    if not log.is_file():
+        raise UserError(f"{log} not found; pass run directories of a scripts/grid.py output (ROOT/SETUP/SCENE/METHOD/"
+                        "SEED)")
+    words = shlex.split(log.read_text().splitlines()[0].split(": ", 1)[1])
+    return words[next(i for i, w in enumerate(words) if w.endswith("train.py")) + 1:]
+
+
+def stage_fits(run_dir: Path) -> list[dict]:
+    """One row per acquisition of `run_dir`: stage, iteration, captured views, train fit, test PSNR (dB)."""
+    stages = json.loads((run_dir / "selection.json").read_text())["stages"]
+    argv = logged_argv(run_dir)
+    with tempfile.TemporaryDirectory() as tmp:
+        argv[argv.index("-m") + 1] = tmp
+        cfg = parse_config(argv + ["--quiet"])
+        run = open_run(cfg, tmp)
+        try:
+            train_stage(run, tqdm(disable=True))
+            models = {run.state.iteration: run.state.gaussians}
+            for path in sorted((run_dir / "checkpoints").glob("chkpnt_*.pt")):
+                ckpt = torch.load(path, map_location="cpu", weights_only=False)
+                state = fresh_state(run.scene, cfg, [], run.plan.total_iterations)
+                restore_state(state, ckpt, cfg, run.scene)
+                models[state.iteration] = state.gaussians
+            rows = []
+            for record in stages:
+                gaussians = models.get(record["iteration"])
+                if gaussians is None:
+                    continue  # a checkpoint the run did not keep
+                cams = [run.scene.train_cameras[v] for v in record["train_views"]]
+                row = {"run": str(run_dir), "stage": record["stage"], "iteration": record["iteration"],
+                       "captured": len(cams),
+                       "train_psnr": mean_psnr(gaussians, cams, run.background, run.settings),
+                       "test_psnr": mean_psnr(gaussians, run.scene.test_cameras, run.background, run.settings)}
+                if abs(row["test_psnr"] - record["test_psnr"]) > REPLAY_TOLERANCE_DB:
+                    raise UserError(f"{run_dir} stage {record['stage']}: replayed test PSNR {row['test_psnr']:.3f} "
+                                    f"dB, recorded {record['test_psnr']:.3f}: not the run's model (another machine "
+                                    "or code?)")
+                rows.append(row)
+        finally:
+            close_run(run)
+    return rows
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("runs", nargs="+", type=Path, help="run directories (ROOT/SETUP/SCENE/METHOD/SEED)")
+    p.add_argument("--json", type=Path, help="also write the rows to this JSON file")
+    args = p.parse_args()
+    torch.set_num_threads(1)
+    rows = []
+    print("| run | stage | iteration | captured | train fit (dB) | test (dB) |\n|---|---|---|---|---|---|")
+    for run_dir in args.runs:
+        for row in stage_fits(run_dir):
+            rows.append(row)
+            print(f"| {row['run']} | {row['stage']} | {row['iteration']} | {row['captured']} | "
+                  f"{row['train_psnr']:.2f} | {row['test_psnr']:.2f} |", flush=True)
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    run_cli(main)

@@ -1,6 +1,7 @@
 """How well each model fitted its captured views when it chose, for grid runs made before selection.json recorded it.
 
     python scripts/selection_fit.py output/paper_stages_6seeds/setup1/mic/cover_pool/seed0 ... [--json rows.json]
+    python scripts/selection_fit.py --table rows.json     # mean fit per scene and acquisition, from saved rows
 
 For every run directory: the first acquisition's model is trained again from the run's logged train.py command
 (`ROOT/SETUP/logs/SCENE/METHOD/SEEDn.log`, written by scripts/grid.py) up to that acquisition, in a temporary
@@ -14,7 +15,9 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
+import statistics
 import tempfile
+from collections import defaultdict
 from pathlib import Path
 
 import torch
@@ -42,8 +45,11 @@ def logged_argv(run_dir: Path) -> list[str]:
 
 def stage_fits(run_dir: Path) -> list[dict]:
     """One row per acquisition of `run_dir`: stage, iteration, captured views, train fit, test PSNR (dB)."""
-    stages = json.loads((run_dir / "selection.json").read_text())["stages"]
     argv = logged_argv(run_dir)
+    selection = run_dir / "selection.json"
+    if not selection.is_file():
+        raise UserError(f"{selection} not found: the run has not acquired yet, or trained without a selector")
+    stages = json.loads(selection.read_text())["stages"]
     with tempfile.TemporaryDirectory() as tmp:
         argv[argv.index("-m") + 1] = tmp
         cfg = parse_config(argv + ["--quiet"])
@@ -76,11 +82,34 @@ def stage_fits(run_dir: Path) -> list[dict]:
     return rows
 
 
+def fit_table(rows: list[dict]) -> str:
+    """Markdown: the mean train fit over the runs of each scene (a run's SCENE folder) at each acquisition."""
+    fits: dict[str, dict[tuple[int, int, int], list[float]]] = defaultdict(lambda: defaultdict(list))
+    for row in rows:
+        fits[Path(row["run"]).parents[1].name][(row["stage"], row["captured"], row["iteration"])].append(
+            row["train_psnr"])
+    stages = sorted({key for per_scene in fits.values() for key in per_scene})
+    lines = ["| scene | runs | " + " | ".join(f"fit at {n} views, {it} it. (dB)" for _, n, it in stages) + " |",
+             "|---|---|" + "---|" * len(stages)]
+    for scene, per_scene in sorted(fits.items()):
+        cells = [f"{statistics.mean(per_scene[key]):.2f}" if key in per_scene else "–" for key in stages]
+        lines.append(f"| {scene} | {max(len(v) for v in per_scene.values())} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("runs", nargs="+", type=Path, help="run directories (ROOT/SETUP/SCENE/METHOD/SEED)")
+    p.add_argument("runs", nargs="*", type=Path, help="run directories (ROOT/SETUP/SCENE/METHOD/SEED)")
     p.add_argument("--json", type=Path, help="also write the rows to this JSON file")
+    p.add_argument("--table", type=Path, help="print the per-scene table of a rows file written by --json, run nothing")
     args = p.parse_args()
+    if args.table:
+        if not args.table.is_file():
+            raise UserError(f"{args.table} not found; write it first with --json")
+        print(fit_table(json.loads(args.table.read_text())))
+        return
+    if not args.runs:
+        raise UserError("pass run directories (ROOT/SETUP/SCENE/METHOD/SEED), or --table ROWS.json")
     torch.set_num_threads(1)
     rows = []
     print("| run | stage | iteration | captured | train fit (dB) | test (dB) |\n|---|---|---|---|---|---|")

@@ -1,0 +1,54 @@
+"""scripts/selection_fit.py: the fit on the captured views replayed for a grid run equals what the run recorded
+(selection.json stage `train_psnr` and `test_psnr`), at the first acquisition (trained again from the logged command)
+and at the later ones (from the stage checkpoints); its table and its bad input."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from tests.conftest import ROOT
+
+ENV = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+
+
+def script(name: str, *args: str, timeout: int = 600) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(ROOT / "scripts" / name), *args], capture_output=True, text=True,
+                          env=ENV, timeout=timeout)
+
+
+@pytest.mark.slow
+def test_replayed_fit_equals_the_recorded_one(tiny_scene, tmp_path):
+    out = tmp_path / "out"
+    r = script("grid.py", "--setup", "setup1", "--data", str(tiny_scene.parent), "--scenes", tiny_scene.name,
+               "--methods", "coverage", "--seeds", "1", "--out", str(out), "--launcher", "local", "--threads", "1",
+               "--iter_scale", "0.005", "--num_points", "150", "--resolution", "-1", "--device", "cpu", "--",
+               "--sh_degree", "1")
+    assert r.returncode == 0, r.stdout + r.stderr
+    run = out / "setup1" / tiny_scene.name / "coverage" / "seed0"
+    rows_path = tmp_path / "rows.json"
+    r = script("selection_fit.py", str(run), "--json", str(rows_path))
+    assert r.returncode == 0, r.stdout + r.stderr
+    rows = json.loads(rows_path.read_text())
+    recorded = {s["stage"]: s for s in json.loads((run / "selection.json").read_text())["stages"]}
+    assert rows[0]["stage"] == 0 and len(rows) >= 2  # the replayed first acquisition and at least one checkpoint
+    for row in rows:
+        stage = recorded[row["stage"]]
+        assert row["captured"] == len(stage["train_views"]) and row["iteration"] == stage["iteration"]
+        assert row["train_psnr"] == pytest.approx(stage["train_psnr"], abs=1e-4)
+        assert row["test_psnr"] == pytest.approx(stage["test_psnr"], abs=1e-4)
+    r = script("selection_fit.py", "--table", str(rows_path))
+    assert r.returncode == 0 and f"| {tiny_scene.name} | 1 | " in r.stdout, r.stdout + r.stderr
+
+
+@pytest.mark.parametrize("args, expected", [
+    ([], "pass run directories"),
+    (["--table", "missing.json"], "missing.json not found"),
+    (["nowhere/setup1/scene/method/seed0"], "seed0.log not found"),
+])
+def test_bad_input_is_one_error_line(tmp_path, args, expected):
+    r = subprocess.run([sys.executable, str(ROOT / "scripts" / "selection_fit.py"), *args], capture_output=True,
+                       text=True, env=ENV, cwd=tmp_path, timeout=120)
+    assert r.returncode != 0 and r.stderr.strip().startswith("error:") and expected in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1

@@ -27,6 +27,7 @@ from training.config import parse_config
 from training.engine import close_run, open_run, train_stage
 from training.state import fresh_state, restore_state
 from training.step import mean_psnr
+from utils.checkpoint import RunDirectory, load_checkpoint
 from utils.errors import UserError, run_cli
 
 REPLAY_TOLERANCE_DB = 1e-3
@@ -57,10 +58,9 @@ def stage_fits(run_dir: Path) -> list[dict]:
         try:
             train_stage(run, tqdm(disable=True))
             models = {run.state.iteration: run.state.gaussians}
-            for path in sorted((run_dir / "checkpoints").glob("chkpnt_*.pt")):
-                ckpt = torch.load(path, map_location="cpu", weights_only=False)
+            for _, path in RunDirectory(run_dir).checkpoints():
                 state = fresh_state(run.scene, cfg, [], run.plan.total_iterations)
-                restore_state(state, ckpt, cfg, run.scene)
+                restore_state(state, load_checkpoint(path), cfg, run.scene)
                 models[state.iteration] = state.gaussians
             rows = []
             for record in stages:

@@ -73,7 +73,8 @@ class RunDirectory:
     def finish(self, summary: dict[str, Any]) -> None:
         write_json(self.status_file, {"status": "complete", **summary})
 
-    def _checkpoints(self) -> list[tuple[int, Path]]:
+    def checkpoints(self) -> list[tuple[int, Path]]:
+        """(iteration, path) of the checkpoints kept, oldest first."""
         folder = self.path / CHECKPOINTS_DIR
         if not folder.is_dir():
             return []
@@ -84,22 +85,25 @@ class RunDirectory:
         """Write `checkpoints/chkpnt_<iteration>.pt` atomically and drop all but the newest few."""
         path = checkpoint_file(self.path, state["iteration"])
         save_torch(path, {"format_version": CHECKPOINT_FORMAT_VERSION, **state})
-        for _, old in self._checkpoints()[:-KEEP_CHECKPOINTS]:
+        for _, old in self.checkpoints()[:-KEEP_CHECKPOINTS]:
             old.unlink(missing_ok=True)
         return path
 
     def latest_checkpoint(self) -> dict[str, Any] | None:
         """The newest checkpoint, or None. A corrupt one is an error naming the file and the fix."""
-        ckpts = self._checkpoints()
-        if not ckpts:
-            return None
-        path = ckpts[-1][1]
-        try:
-            ckpt = torch.load(path, map_location="cpu", weights_only=False)
-        except Exception:
-            raise UserError(f"checkpoint {path} is corrupt or truncated; delete it to resume from the previous one, "
-                            "or pass --overwrite to start again") from None
-        if not isinstance(ckpt, dict) or ckpt.get("format_version") != CHECKPOINT_FORMAT_VERSION:
-            raise UserError(f"checkpoint {path} has an unknown format (expected version {CHECKPOINT_FORMAT_VERSION}); "
-                            "pass --overwrite to start again")
-        return ckpt
+        ckpts = self.checkpoints()
+        return load_checkpoint(ckpts[-1][1]) if ckpts else None
+
+
+def load_checkpoint(path: Path) -> dict[str, Any]:
+    """A checkpoint file written by `RunDirectory.save_checkpoint`; a corrupt or unknown one is an error naming the
+    file and the fix."""
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception:
+        raise UserError(f"checkpoint {path} is corrupt or truncated; delete it to resume from the previous one, "
+                        "or pass --overwrite to start again") from None
+    if not isinstance(ckpt, dict) or ckpt.get("format_version") != CHECKPOINT_FORMAT_VERSION:
+        raise UserError(f"checkpoint {path} has an unknown format (expected version {CHECKPOINT_FORMAT_VERSION}); "
+                        "pass --overwrite to start again")
+    return ckpt

@@ -29,28 +29,33 @@ from training.state import fresh_state, restore_state
 from training.step import mean_psnr
 from utils.checkpoint import RunDirectory, load_checkpoint
 from utils.errors import UserError, run_cli
+from utils.io import read_json
 
 REPLAY_TOLERANCE_DB = 1e-3
 
 
 def logged_argv(run_dir: Path) -> list[str]:
     """The train.py arguments scripts/grid.py logged for `run_dir` (ROOT/SETUP/SCENE/METHOD/SEED)."""
+    layout = "pass run directories of a scripts/grid.py output (ROOT/SETUP/SCENE/METHOD/SEED)"
+    if len(run_dir.parents) < 4:
+        raise UserError(f"{run_dir} is not a grid run directory; {layout}")
     setup_dir, scene, method, seed = run_dir.parents[2], run_dir.parents[1].name, run_dir.parent.name, run_dir.name
     log = setup_dir / "logs" / scene / method / f"{seed}.log"
     if not log.is_file():
-        raise UserError(f"{log} not found; pass run directories of a scripts/grid.py output (ROOT/SETUP/SCENE/METHOD/"
-                        "SEED)")
-    words = shlex.split(log.read_text().splitlines()[0].split(": ", 1)[1])
-    return words[next(i for i, w in enumerate(words) if w.endswith("train.py")) + 1:]
+        raise UserError(f"{log} not found; {layout}")
+    first = log.read_text().splitlines()[:1]
+    words = shlex.split(first[0].split(": ", 1)[-1]) if first else []
+    start = next((i + 1 for i, w in enumerate(words) if w.endswith("train.py")), None)
+    if start is None:
+        raise UserError(f"{log} does not start with the train.py command scripts/grid.py logs; is it a grid log?")
+    return words[start:]
 
 
 def stage_fits(run_dir: Path) -> list[dict]:
     """One row per acquisition of `run_dir`: stage, iteration, captured views, train fit, test PSNR (dB)."""
     argv = logged_argv(run_dir)
-    selection = run_dir / "selection.json"
-    if not selection.is_file():
-        raise UserError(f"{selection} not found: the run has not acquired yet, or trained without a selector")
-    stages = json.loads(selection.read_text())["stages"]
+    stages = read_json(run_dir / "selection.json", what="selection record",
+                       fix="pass a run that has acquired, trained with a selector").get("stages", [])
     with tempfile.TemporaryDirectory() as tmp:
         argv[argv.index("-m") + 1] = tmp
         cfg = parse_config(argv + ["--quiet"])
@@ -106,7 +111,7 @@ def main() -> None:
     if args.table:
         if not args.table.is_file():
             raise UserError(f"{args.table} not found; write it first with --json")
-        print(fit_table(json.loads(args.table.read_text())))
+        print(fit_table(read_json(args.table, kind=list, what="fit rows", fix="write them again with --json")))
         return
     if not args.runs:
         raise UserError("pass run directories (ROOT/SETUP/SCENE/METHOD/SEED), or --table ROWS.json")

@@ -45,9 +45,16 @@ def test_replayed_fit_equals_the_recorded_one(tiny_scene, tmp_path):
 @pytest.mark.parametrize("args, expected", [
     ([], "pass run directories"),
     (["--table", "missing.json"], "missing.json not found"),
+    (["--table", "damaged.json"], "fit rows damaged.json is not valid JSON"),
     (["nowhere/setup1/scene/method/seed0"], "seed0.log not found"),
+    (["seed0"], "seed0 is not a grid run directory"),
+    (["grid/setup1/scene/method/seed1"], "does not start with the train.py command"),
 ])
 def test_bad_input_is_one_error_line(tmp_path, args, expected):
+    log = tmp_path / "grid" / "setup1" / "logs" / "scene" / "method" / "seed1.log"
+    log.parent.mkdir(parents=True)
+    log.write_text("not a grid log\n")
+    (tmp_path / "damaged.json").write_text("[{")
     r = subprocess.run([sys.executable, str(ROOT / "scripts" / "selection_fit.py"), *args], capture_output=True,
                        text=True, env=ENV, cwd=tmp_path, timeout=120)
     assert r.returncode != 0 and r.stderr.strip().startswith("error:") and expected in r.stderr

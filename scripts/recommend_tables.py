@@ -65,19 +65,23 @@ def modes_table(folder: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def scene_results(results_dir: Path, folder: str) -> dict:
+    """A scene folder's committed recommend-then-train results.json."""
+    return read_json(results_dir / folder / "results.json", what="recommend-then-train results",
+                     fix="run scripts/recommend_then_train.py")
+
+
 def generated_blocks(results_dir: Path = ROOT / "docs" / "results") -> dict[str, str]:
     """Block name -> its text: one per scene folder, the comparisons across the design scenes and across the
     held-out ones (the default's own checks in none), and (where its folder is there) the cached-vs-streaming
     table."""
     blocks = {}
     for scenes, compare in ((SCENES, COMPARE), (HELDOUT, COMPARE_HELDOUT)):
-        results = {scene: read_json(results_dir / folder / "results.json", what="recommend-then-train results",
-                                    fix="run scripts/recommend_then_train.py") for scene, folder in scenes}
+        results = {scene: scene_results(results_dir, folder) for scene, folder in scenes}
         blocks.update({folder: scene_summary(results[scene]) for scene, folder in scenes})
         blocks[compare] = compare_table(results)
     for _, folder in DEFAULT_CHECKS:
-        blocks[folder] = scene_summary(read_json(results_dir / folder / "results.json", what="recommend-then-train "
-                                                 "results", fix="run scripts/recommend_then_train.py"))
+        blocks[folder] = scene_summary(scene_results(results_dir, folder))
     if (results_dir / MODES).is_dir():
         blocks[MODES] = modes_table(results_dir / MODES)
     return blocks

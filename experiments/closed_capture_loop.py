@@ -154,10 +154,12 @@ class FirstNoteOnly(logging.Filter):
 
 
 def run_capture_loop(args: argparse.Namespace) -> None:
-    """scripts/capture_loop.py's parsed flags (`args`): only the plot of `args.plot`'s folder, or every (method, seed)
-    loop into `args.output`, then the plot (`args.png`, default: psnr_vs_views.png in that folder)."""
+    """scripts/capture_loop.py's parsed flags (`args`): only the summary and plot of `args.plot`'s folder, or every
+    (method, seed) loop into `args.output`, then its summary.md and the plot (`args.png`, default: psnr_vs_views.png
+    in that folder)."""
     png = Path(args.png) if args.png else Path(args.plot or args.output) / "psnr_vs_views.png"
     if args.plot:
+        write_summary(Path(args.plot))
         plot(Path(args.plot), png)
         return
     root = Path(args.output)
@@ -171,7 +173,12 @@ def run_capture_loop(args: argparse.Namespace) -> None:
                 run_loop(method, seed, root / method / f"seed{seed}", args)
         finally:
             recommend_log.removeFilter(once)
+    write_summary(root)
+    plot(root, png)
+
+
+def write_summary(root: Path) -> None:
+    """`summary_table` of the loops under `root` into root/summary.md, and printed."""
     (root / "summary.md").write_text(summary_table(root))
     print((root / "summary.md").read_text())
-    plot(root, png)
 

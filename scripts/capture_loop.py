@@ -45,7 +45,7 @@ def main() -> None:
                    help="the candidates' elevation range LO,HI in degrees (default 0,80; the test views lie at 10-75)")
     p.add_argument("--iters_per_view", type=int, default=60, help="training iterations per captured view")
     p.add_argument("--max_gaussians", type=int, default=4000)
-    p.add_argument("--plot", help="only draw the curve of an output folder")
+    p.add_argument("--plot", help="only rewrite the summary.md and draw the curve of an output folder")
     p.add_argument("--png", default=None, help="the plot (default: psnr_vs_views.png in the output or --plot folder)")
     args = p.parse_args()
     run_capture_loop(args)

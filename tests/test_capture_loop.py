@@ -1,5 +1,5 @@
 """experiments/closed_capture_loop.py (CLI scripts/capture_loop.py): the built-in ground truth "captured" at given
-poses, and the plot of an output folder (the loop itself trains with train.py: `test_the_cli_runs_one_round`, slow)."""
+poses, and the summary and plot of an output folder (the loop itself trains with train.py: `test_the_cli_runs_one_round`, slow)."""
 import json
 import logging
 import math
@@ -33,7 +33,7 @@ def test_capture_writes_images_and_frames_that_read_back_as_the_poses(tmp_path):
         assert torch.allclose(cam.viewmat.double(), viewmat.double(), atol=1e-5)
 
 
-def test_plot_only_draws_every_method_folder(tmp_path):
+def test_plot_only_draws_and_tables_every_method_folder(tmp_path):
     runs = tmp_path / "runs"
     for method, psnr in (("coverage", 20.0), ("lite_gs", 21.0)):
         folder = runs / method / "seed0"
@@ -47,6 +47,9 @@ def test_plot_only_draws_every_method_folder(tmp_path):
     run_capture_loop(args)
     assert png.is_file() and png.stat().st_size > 0
     assert not (tmp_path / "unused").exists()
+    summary = (runs / "summary.md").read_text()  # rewritten from the folders: a method added later joins the table
+    assert "| coverage | 1 | 20.00 ± 0.00 | 21.00 ± 0.00 |" in summary and "| lite_gs | 1 |" in summary
+    assert "builtin_r32" not in summary
 
 
 def test_summary_tables_mean_and_std_over_seeds(tmp_path):

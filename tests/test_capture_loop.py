@@ -1,5 +1,6 @@
 """experiments/closed_capture_loop.py (CLI scripts/capture_loop.py): the built-in ground truth "captured" at given
-poses, and the summary and plot of an output folder (the loop itself trains with train.py: `test_the_cli_runs_one_round`, slow)."""
+poses, and the summary and plot of an output folder (the loop itself trains with train.py:
+`test_the_cli_runs_one_round`, slow)."""
 import json
 import logging
 import math

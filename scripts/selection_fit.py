@@ -13,7 +13,6 @@ themselves (selection.json, stage `train_psnr`).
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import statistics
 import tempfile
@@ -29,7 +28,7 @@ from training.state import fresh_state, restore_state
 from training.step import mean_psnr
 from utils.checkpoint import RunDirectory, load_checkpoint
 from utils.errors import UserError, run_cli
-from utils.io import read_json
+from utils.io import read_json, write_json
 
 REPLAY_TOLERANCE_DB = 1e-3
 
@@ -124,7 +123,7 @@ def main() -> None:
             print(f"| {row['run']} | {row['stage']} | {row['iteration']} | {row['captured']} | "
                   f"{row['train_psnr']:.2f} | {row['test_psnr']:.2f} |", flush=True)
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=1) + "\n")
+        write_json(args.json, rows)
 
 
 if __name__ == "__main__":

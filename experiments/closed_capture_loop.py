@@ -22,6 +22,7 @@ from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions, make_builtin_sce
 from scene.cameras import look_at
 from scene.frames import GL_TO_CV
 from utils import model_dir
+from utils.errors import UserError
 from utils.image import save_image
 from utils.io import read_json, write_json
 
@@ -159,8 +160,12 @@ def run_capture_loop(args: argparse.Namespace) -> None:
     in that folder)."""
     png = Path(args.png) if args.png else Path(args.plot or args.output) / "psnr_vs_views.png"
     if args.plot:
-        write_summary(Path(args.plot))
-        plot(Path(args.plot), png)
+        root = Path(args.plot)
+        if not root.is_dir() or not loop_results(root):
+            raise UserError(f"--plot {root}: no loops there (METHOD/seedN/loop.json); give the -o folder of a "
+                            "finished scripts/capture_loop.py run")
+        write_summary(root)
+        plot(root, png)
         return
     root = Path(args.output)
     for method in args.methods:

@@ -64,6 +64,15 @@ def test_summary_tables_mean_and_std_over_seeds(tmp_path):
     assert "| random | 2 | 21.00 ± 1.00 | 22.00 ± 1.00 |" in table
 
 
+@pytest.mark.parametrize("folder", ["missing", "empty"])
+def test_plot_of_a_folder_without_loops_is_one_error_line(folder, tmp_path):
+    (tmp_path / "empty").mkdir()
+    r = run_cli(str(ROOT / "scripts" / "capture_loop.py"), "--plot", str(tmp_path / folder))
+    assert r.returncode == 2 and r.stderr.strip().splitlines()[-1].startswith("error: --plot")
+    assert "Traceback" not in r.stderr
+    assert list((tmp_path / "empty").iterdir()) == []  # no empty summary or plot left behind
+
+
 @pytest.mark.parametrize("bad", ["10", "80,10", "a,b", "0,95"])
 def test_a_bad_elevation_range_is_one_error_line(bad, tmp_path):
     r = run_cli(str(ROOT / "scripts" / "capture_loop.py"), "--elevation", bad, "-o", str(tmp_path / "x"))

@@ -116,5 +116,13 @@ class PoolCoverageOracle:
         rows, error = self._error_with(view_id)
         self.error[rows] = error
 
+    def snapshot(self) -> torch.Tensor:
+        """The committed state (E(S) for every pair), for `restore`: lets a selector score another set, then return."""
+        return self.error.clone()
+
+    def restore(self, state: torch.Tensor) -> None:
+        """Return to a `snapshot`'s state (not an oracle evaluation; the evaluated count is kept)."""
+        self.error = state.clone()
+
     def reset_counts(self) -> None:
         self.evaluated = 0

@@ -36,6 +36,10 @@ def test_options_reach_the_rule_and_the_fisher_branch():
     auto = build_selector("auto", auto_min_views=3, auto_min_iters_per_view=0, eps=0.3)
     assert auto.for_step(3, 0).selector.name == "lite_gs" and auto.for_step(3, 0).selector.config.eps == 0.3
     assert auto.for_step(2, 10**6).selector.name == "cover_pool"
+    assert auto.for_step(2, 10**6).selector.config.pool_compare == "none"
+    compared = build_selector("auto", pool_compare="coverage").for_step(2, 0)
+    assert compared.selector.config.pool_compare == "coverage" and "compared with coverage's" in compared.rule
+    assert build_selector("auto", pool_compare="coverage").conservative_count(10, 3) == 27 + 3
     cover_pool = build_selector("cover_pool")
     assert cover_pool.for_step(5, 1000) == StepChoice(cover_pool, None)  # a selector without a rule runs itself
     assert auto.delegates and not build_selector("cover_pool").delegates
@@ -93,6 +97,7 @@ def test_train_py_switches_at_the_rule_and_records_it(tiny_scene, tmp_path):
     ("--auto_min_views", "0", "--auto_min_views must be an integer >= 1, got 0"),
     ("--auto_min_iters_per_view", "-1", "--auto_min_iters_per_view must be an integer >= 0, got -1"),
     ("--eps", "1.5", "eps"),
+    ("--pool_compare", "fps", "--pool_compare must be one of none, coverage, got 'fps'"),
 ])
 def test_out_of_range_options_are_one_error_line(tmp_path, flag, value, expected):
     ply = tmp_path / "splat.ply"

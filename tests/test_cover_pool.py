@@ -1,12 +1,14 @@
 """The pool-coverage oracle (`active.pool_cover_oracle`) against its definition written out one pose, Gaussian and
 captured view at a time, with opacity and with per-pose pixel weights; its gains only shrink as views are committed
 (lazy greedy makes exhaustive greedy's picks); the `cover_pool` selector and its `--pool_weight` through
-`build_oracle`."""
+`build_oracle`; `--pool_compare coverage` keeps whichever of greedy's and the farthest-camera picks covers more,
+against both sets' objective written out, with its counts."""
 import pytest
 import torch
 
 from active.base import SelectionContext
 from active.blend_weights import VISIBLE_PIXELS, blend_weights
+from active.farthest_point import farthest_point_picks
 from active.fisher import build_oracle
 from active.pool_cover_oracle import PoolCoverageOracle, check_memory
 from active.registry import build_selector
@@ -126,6 +128,48 @@ def test_pool_weight_pixels_renders_each_pose_and_keeps_exact_greedy():
     reference = exhaustive_greedy(list(range(1, len(cams))), 3, PoolCoverageOracle(
         gaussians.means, pixels, cams, [0], inside=pixels >= VISIBLE_PIXELS))
     assert sel.ids == reference.ids
+
+
+def random_points(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
+    g = torch.Generator().manual_seed(seed)
+    means = (torch.rand(n, 3, generator=g, dtype=torch.float64) * 2 - 1) * 1.2  # [n, 3]
+    return means, torch.rand(n, generator=g, dtype=torch.float64)  # [n] opacities
+
+
+@pytest.mark.parametrize("seed, spread_wins", [(2, True), (0, False)])
+def test_pool_compare_keeps_the_set_that_covers_more(seed, spread_wins):
+    """Spiral poses, view 0 captured, K = 3: seed 2 is an instance where the farthest-camera picks cover more than
+    greedy's (greedy is only a 1 - 1/e approximation), seed 0 one where greedy's do."""
+    (means, weights), cams = random_points(30, seed), spiral_cameras(16)
+    centers = torch.stack([c.camera_center for c in cams])  # [V, 3]
+    pool = list(range(1, len(cams)))
+    greedy = exhaustive_greedy(pool, 3, PoolCoverageOracle(means, weights, cams, [0]))
+    spread = farthest_point_picks(centers.double(), [0], pool, 3)
+
+    def drop(views):
+        return reference_objective(means, weights, cams, [0]) - reference_objective(means, weights, cams, [0, *views])
+
+    assert (drop(spread) > drop(greedy.ids)) == spread_wins  # the instance exercises the branch it names
+    oracle = PoolCoverageOracle(means, weights, cams, [0])
+    selector = build_selector("cover_pool", pool_compare="coverage")
+    ctx = SelectionContext(pool, oracle, torch.Generator().manual_seed(0), 0, train_ids=(0,), camera_centers=centers)
+    sel = selector.select(ctx, 3)
+    kept = spread if spread_wins else greedy.ids
+    assert sel.ids == kept
+    assert sum(sel.gains) == pytest.approx(drop(kept), rel=1e-9)
+    # the oracle's state is the kept set's: nothing of the other set stays committed
+    assert oracle.objective() == pytest.approx(reference_objective(means, weights, cams, [0, *kept]), rel=1e-10)
+    lazy = PoolCoverageOracle(means, weights, cams, [0])
+    build_selector("cover_pool").select(SelectionContext(pool, lazy, torch.Generator(), 0, train_ids=(0,),
+                                                         camera_centers=centers), 3)
+    assert oracle.evaluated == lazy.evaluated + 3  # greedy's gains, then the spread set's three
+    assert sel.conservative == selector.conservative_count(len(pool), 3) == greedy.conservative + 3
+
+
+def test_pool_compare_none_is_plain_greedy_and_an_unknown_value_is_one_error_line():
+    assert build_selector("cover_pool").config.pool_compare == "none"
+    with pytest.raises(UserError, match="--pool_compare must be one of none, coverage"):
+        build_selector("cover_pool", pool_compare="fps")
 
 
 def test_an_unknown_pool_weight_is_one_error_line():

@@ -19,9 +19,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from active.base import Selection, SelectionContext, Selector, StepChoice, check_eps
-from active.oracle_counts import exhaustive_count
 from active.registry import register_selector
-from active.selectors.cover_pool import CoverPoolSelector
+from active.selectors.cover_pool import (POOL_COMPARE_HELP, CoverPoolConfig, CoverPoolSelector,
+                                        check_pool_compare)
 from active.selectors.lite_gs import LiteGSConfig, LiteGSSelector
 from utils.errors import UserError
 
@@ -39,6 +39,7 @@ class AutoConfig:
                 f"integer >= 0 (default {DEFAULT_MIN_ITERS_PER_VIEW})"})
     eps: float = field(default=0.1, metadata={"help": "accuracy parameter in (0, 1): guarantee 1 - exp(-(1 - eps)), "
                                                       "about M ln(1/eps) oracles per step"})
+    pool_compare: str = field(default="none", metadata={"help": POOL_COMPARE_HELP})
 
     def __post_init__(self) -> None:
         if not isinstance(self.auto_min_views, int) or self.auto_min_views < 1:
@@ -46,6 +47,7 @@ class AutoConfig:
         if not isinstance(self.auto_min_iters_per_view, int) or self.auto_min_iters_per_view < 0:
             raise UserError(f"--auto_min_iters_per_view must be an integer >= 0, got {self.auto_min_iters_per_view!r}")
         check_eps(self.eps)
+        check_pool_compare(self.pool_compare)
 
 
 @register_selector("auto", config=AutoConfig)
@@ -57,7 +59,7 @@ class AutoSelector(Selector):
 
     def __init__(self, config: AutoConfig | None = None):
         self.config = config if config is not None else AutoConfig()
-        self.geometric = CoverPoolSelector()
+        self.geometric = CoverPoolSelector(CoverPoolConfig(pool_compare=self.config.pool_compare))
         self.fisher = LiteGSSelector(LiteGSConfig(eps=self.config.eps))
 
     def uses_fisher(self, num_captured: int, iterations: int | None) -> bool:
@@ -74,13 +76,14 @@ class AutoSelector(Selector):
                                            f"(lite_gs, eps {c.eps}), as from {c.auto_min_views} views trained "
                                            f"{c.auto_min_iters_per_view} iterations each (measured: above coverage "
                                            f"on 7 of 8 scenes, 0.3 dB below it on mic)")
+        compared = ", compared with coverage's" if c.pool_compare == "coverage" else ""
         return StepChoice(self.geometric, f"auto: {num_captured} captured views, {trained}: at this stage of training "
-                                          f"the picks are geometric (cover_pool); the Fisher (lite_gs) from "
+                                          f"the picks are geometric (cover_pool{compared}); the Fisher (lite_gs) from "
                                           f"{c.auto_min_views} views trained {c.auto_min_iters_per_view} iterations "
                                           f"each")
 
     def conservative_count(self, m: int, k: int) -> int:
-        return exhaustive_count(m, k)  # the larger of the two branches' (cover_pool's worst case)
+        return self.geometric.conservative_count(m, k)  # the larger of the two branches' (cover_pool's worst case)
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         raise RuntimeError("auto chooses a selector per step: call for_step(num_captured, iterations) and run its "

@@ -13,17 +13,13 @@ themselves (selection.json, stage `train_psnr`).
 from __future__ import annotations
 
 import argparse
-import shlex
 import statistics
-import tempfile
 from collections import defaultdict
 from pathlib import Path
 
 import torch
-from tqdm import tqdm
 
-from training.config import parse_config
-from training.engine import close_run, open_run, train_stage
+from experiments.replay import first_acquisition, logged_argv, saved_rows
 from training.state import fresh_state, restore_state
 from training.step import mean_psnr
 from utils.checkpoint import RunDirectory, load_checkpoint
@@ -33,56 +29,32 @@ from utils.io import read_json, write_json
 REPLAY_TOLERANCE_DB = 1e-3
 
 
-def logged_argv(run_dir: Path) -> list[str]:
-    """The train.py arguments scripts/grid.py logged for `run_dir` (ROOT/SETUP/SCENE/METHOD/SEED)."""
-    layout = "pass run directories of a scripts/grid.py output (ROOT/SETUP/SCENE/METHOD/SEED)"
-    if len(run_dir.parents) < 4:
-        raise UserError(f"{run_dir} is not a grid run directory; {layout}")
-    setup_dir, scene, method, seed = run_dir.parents[2], run_dir.parents[1].name, run_dir.parent.name, run_dir.name
-    log = setup_dir / "logs" / scene / method / f"{seed}.log"
-    if not log.is_file():
-        raise UserError(f"{log} not found; {layout}")
-    first = log.read_text().splitlines()[:1]
-    words = shlex.split(first[0].split(": ", 1)[-1]) if first else []
-    start = next((i + 1 for i, w in enumerate(words) if w.endswith("train.py")), None)
-    if start is None:
-        raise UserError(f"{log} does not start with the train.py command scripts/grid.py logs; is it a grid log?")
-    return words[start:]
-
-
 def stage_fits(run_dir: Path) -> list[dict]:
     """One row per acquisition of `run_dir`: stage, iteration, captured views, train fit, test PSNR (dB)."""
-    argv = logged_argv(run_dir)
+    logged_argv(run_dir)  # a grid run: checked before anything is read
     stages = read_json(run_dir / "selection.json", what="selection record",
                        fix="pass a run that has acquired, trained with a selector").get("stages", [])
-    with tempfile.TemporaryDirectory() as tmp:
-        argv[argv.index("-m") + 1] = tmp
-        cfg = parse_config(argv + ["--quiet"])
-        run = open_run(cfg, tmp)
-        try:
-            train_stage(run, tqdm(disable=True))
-            models = {run.state.iteration: run.state.gaussians}
-            for _, path in RunDirectory(run_dir).checkpoints():
-                state = fresh_state(run.scene, cfg, [], run.plan.total_iterations)
-                restore_state(state, load_checkpoint(path), cfg, run.scene)
-                models[state.iteration] = state.gaussians
-            rows = []
-            for record in stages:
-                gaussians = models.get(record["iteration"])
-                if gaussians is None:
-                    continue  # a checkpoint the run did not keep
-                cams = [run.scene.train_cameras[v] for v in record["train_views"]]
-                row = {"run": str(run_dir), "stage": record["stage"], "iteration": record["iteration"],
-                       "captured": len(cams),
-                       "train_psnr": mean_psnr(gaussians, cams, run.background, run.settings),
-                       "test_psnr": mean_psnr(gaussians, run.scene.test_cameras, run.background, run.settings)}
-                if abs(row["test_psnr"] - record["test_psnr"]) > REPLAY_TOLERANCE_DB:
-                    raise UserError(f"{run_dir} stage {record['stage']}: replayed test PSNR {row['test_psnr']:.3f} "
-                                    f"dB, recorded {record['test_psnr']:.3f}: not the run's model (another machine "
-                                    "or code?)")
-                rows.append(row)
-        finally:
-            close_run(run)
+    rows = []
+    with first_acquisition(run_dir) as (run, cfg):
+        models = {run.state.iteration: run.state.gaussians}
+        for _, path in RunDirectory(run_dir).checkpoints():
+            state = fresh_state(run.scene, cfg, [], run.plan.total_iterations)
+            restore_state(state, load_checkpoint(path), cfg, run.scene)
+            models[state.iteration] = state.gaussians
+        for record in stages:
+            gaussians = models.get(record["iteration"])
+            if gaussians is None:
+                continue  # a checkpoint the run did not keep
+            cams = [run.scene.train_cameras[v] for v in record["train_views"]]
+            row = {"run": str(run_dir), "stage": record["stage"], "iteration": record["iteration"],
+                   "captured": len(cams),
+                   "train_psnr": mean_psnr(gaussians, cams, run.background, run.settings),
+                   "test_psnr": mean_psnr(gaussians, run.scene.test_cameras, run.background, run.settings)}
+            if abs(row["test_psnr"] - record["test_psnr"]) > REPLAY_TOLERANCE_DB:
+                raise UserError(f"{run_dir} stage {record['stage']}: replayed test PSNR {row['test_psnr']:.3f} "
+                                f"dB, recorded {record['test_psnr']:.3f}: not the run's model (another machine "
+                                "or code?)")
+            rows.append(row)
     return rows
 
 
@@ -108,9 +80,7 @@ def main() -> None:
     p.add_argument("--table", type=Path, help="print the per-scene table of a rows file written by --json, run nothing")
     args = p.parse_args()
     if args.table:
-        if not args.table.is_file():
-            raise UserError(f"{args.table} not found; write it first with --json")
-        print(fit_table(read_json(args.table, kind=list, what="fit rows", fix="write them again with --json")))
+        print(fit_table(saved_rows(args.table, "fit rows")))
         return
     if not args.runs:
         raise UserError("pass run directories (ROOT/SETUP/SCENE/METHOD/SEED), or --table ROWS.json")

@@ -1,0 +1,57 @@
+"""Replay a grid run's first acquisition: its model trained again, in a temporary directory, from the train.py
+command scripts/grid.py logged, up to the first selection (the same machine replays the same floats). Used by
+scripts/selection_fit.py and scripts/pick_objective.py, which also read back their saved rows here (`saved_rows`)."""
+from __future__ import annotations
+
+import contextlib
+import shlex
+import tempfile
+from pathlib import Path
+from typing import Iterator
+
+from tqdm import tqdm
+
+from training.config import TrainConfig, parse_config
+from training.engine import Run, close_run, open_run, train_stage
+from utils.errors import UserError
+from utils.io import read_json
+
+LAYOUT = "pass run directories of a scripts/grid.py output (ROOT/SETUP/SCENE/METHOD/SEED)"
+
+
+def logged_argv(run_dir: Path) -> list[str]:
+    """The train.py arguments scripts/grid.py logged for `run_dir` (ROOT/SETUP/SCENE/METHOD/SEED)."""
+    if len(run_dir.parents) < 4:
+        raise UserError(f"{run_dir} is not a grid run directory; {LAYOUT}")
+    setup_dir, scene, method, seed = run_dir.parents[2], run_dir.parents[1].name, run_dir.parent.name, run_dir.name
+    log = setup_dir / "logs" / scene / method / f"{seed}.log"
+    if not log.is_file():
+        raise UserError(f"{log} not found; {LAYOUT}")
+    first = log.read_text().splitlines()[:1]
+    words = shlex.split(first[0].split(": ", 1)[-1]) if first else []
+    start = next((i + 1 for i, w in enumerate(words) if w.endswith("train.py")), None)
+    if start is None:
+        raise UserError(f"{log} does not start with the train.py command scripts/grid.py logs; is it a grid log?")
+    return words[start:]
+
+
+@contextlib.contextmanager
+def first_acquisition(run_dir: Path) -> Iterator[tuple[Run, TrainConfig]]:
+    """The open run (scene, settings, state) trained again up to `run_dir`'s first acquisition, and its config."""
+    argv = logged_argv(run_dir)
+    with tempfile.TemporaryDirectory() as tmp:
+        argv[argv.index("-m") + 1] = tmp
+        cfg = parse_config(argv + ["--quiet"])
+        run = open_run(cfg, tmp)
+        try:
+            train_stage(run, tqdm(disable=True))
+            yield run, cfg
+        finally:
+            close_run(run)
+
+
+def saved_rows(path: Path, what: str) -> list[dict]:
+    """The rows a replay script wrote with --json (one error line if the file is missing or damaged)."""
+    if not path.is_file():
+        raise UserError(f"{path} not found; write it first with --json")
+    return read_json(path, kind=list, what=what, fix="write them again with --json")

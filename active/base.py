@@ -52,6 +52,7 @@ class Selection:
     ids: list[int]  # chosen view ids, in pick order
     gains: list[float]  # marginal gain of each pick when chosen (0.0 for selectors without an oracle)
     conservative: int  # oracle count the paper reports: every candidate offered at every pick counts once
+    note: str | None = None  # one line on a choice the selector made inside the step (printed and recorded)
 
 
 @dataclass(frozen=True)

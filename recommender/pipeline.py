@@ -232,6 +232,8 @@ def recommend(model: LoadedModel, pool: Pool, selector: Selector, k: int, *, see
                              model.background, model.settings, seed=seed, stage=0, fisher=model.fisher,
                              progress=progress)
         picks, gains = list(step.selection.ids), list(step.selection.gains)
+        if step.selection.note is not None:
+            notes.append(step.selection.note)
     for v in unseen[:k_taken - len(picks)]:
         picks.append(v)
         gains.append(0.0)

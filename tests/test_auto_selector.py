@@ -93,6 +93,24 @@ def test_train_py_switches_at_the_rule_and_records_it(tiny_scene, tmp_path):
     assert "rule" not in ref_stage
 
 
+def test_the_pool_compare_note_reaches_selection_json_and_recommendations(tiny_scene, tmp_path):
+    """Which set `--pool_compare coverage` kept is one line in train.py's stage record and recommend.py's notes."""
+    model = tmp_path / "compared"
+    r = run_cli("train.py", "-s", str(tiny_scene), "--num_init_views", "2", "--views_per_step", "3",
+                "--iters_per_view", "10", "--seed", "4", "--quiet", "-m", str(model), "--method", "auto",
+                "--pool_compare", "coverage", "--max_views", "5", "--iterations", "60")
+    assert r.returncode == 0, r.stderr
+    [stage] = json.loads((model / "selection.json").read_text())["stages"]
+    assert stage["note"].startswith("cover_pool --pool_compare coverage: kept ")
+    assert stage["oracle_calls"]["conservative"] == sum(12 - j for j in range(3)) + 3  # 12 candidates, K = 3
+    ply = tmp_path / "splat.ply"
+    _graphdeco_ply(ply)
+    captured = load_model(ply, _cameras_json(tmp_path / "cameras.json", EYES))
+    pool = make_pool(captured, generate("orbit", 8, captured.captured))
+    rec = recommend(captured, pool, build_selector("auto", pool_compare="coverage"), 3, seed=2)
+    assert rec.acquisition.selection.note in rec.notes and "kept" in rec.acquisition.selection.note
+
+
 @pytest.mark.parametrize("flag, value, expected", [
     ("--auto_min_views", "0", "--auto_min_views must be an integer >= 1, got 0"),
     ("--auto_min_iters_per_view", "-1", "--auto_min_iters_per_view must be an integer >= 0, got -1"),

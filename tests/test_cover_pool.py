@@ -156,6 +156,8 @@ def test_pool_compare_keeps_the_set_that_covers_more(seed, spread_wins):
     sel = selector.select(ctx, 3)
     kept = spread if spread_wins else greedy.ids
     assert sel.ids == kept
+    kept_name = "coverage's farthest-camera picks" if spread_wins else "greedy's picks"
+    assert sel.note.startswith(f"cover_pool --pool_compare coverage: kept {kept_name}") and "\n" not in sel.note
     assert sum(sel.gains) == pytest.approx(drop(kept), rel=1e-9)
     # the oracle's state is the kept set's: nothing of the other set stays committed
     assert oracle.objective() == pytest.approx(reference_objective(means, weights, cams, [0, *kept]), rel=1e-10)
@@ -168,6 +170,10 @@ def test_pool_compare_keeps_the_set_that_covers_more(seed, spread_wins):
 
 def test_pool_compare_none_is_plain_greedy_and_an_unknown_value_is_one_error_line():
     assert build_selector("cover_pool").config.pool_compare == "none"
+    means, weights, cams = scene(n=30)
+    ctx = SelectionContext(list(range(1, 10)), PoolCoverageOracle(means, weights, cams, [0]), torch.Generator(), 0,
+                           train_ids=(0,), camera_centers=torch.stack([c.camera_center for c in cams]))
+    assert build_selector("cover_pool").select(ctx, 2).note is None  # nothing compared, nothing to say
     with pytest.raises(UserError, match="--pool_compare must be one of none, coverage"):
         build_selector("cover_pool", pool_compare="fps")
 

@@ -58,6 +58,7 @@ def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: S
         "candidates": len(candidates),
         "selected": [int(v) for v in selection.ids],
         "gains": [float(g) for g in selection.gains],
+        **({"note": selection.note} if selection.note is not None else {}),
         "oracle_calls": {"conservative": selection.conservative, "evaluated": step.evaluated},
         "fisher_views_computed": step.fisher_views_computed,
         "fisher_seconds": step.fisher_seconds,

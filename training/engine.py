@@ -180,8 +180,9 @@ def acquire(run: Run, progress: tqdm) -> None:
     progress.write(f"[stage {state.stage}] selecting {k} of {len(run.scene.train_cameras) - len(state.train_views)} "
                    f"candidates with {cfg.active.method}")
     record = acquire_views(state, run.scene, cfg, run.selector, k, run.background, run.settings)
-    if "rule" in record:
-        progress.write(f"[stage {state.stage}] {record['rule']}")
+    for line in (record.get("rule"), record.get("note")):
+        if line is not None:
+            progress.write(f"[stage {state.stage}] {line}")
     state.stages.append(record)
     state.train_views = state.train_views + record["selected"]
     state.view_stack = []

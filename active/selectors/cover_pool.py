@@ -82,7 +82,12 @@ class CoverPoolSelector(LazyPopSelector):
             spread_gains.append(oracle.gain(view))
             oracle.commit(view)
         conservative = greedy.conservative + len(spread)
-        if sum(spread_gains) > sum(greedy.gains):
-            return Selection(spread, spread_gains, conservative)
+        spread_covers, greedy_covers = sum(spread_gains), sum(greedy.gains)
+        if spread_covers > greedy_covers:
+            return Selection(spread, spread_gains, conservative,
+                             f"cover_pool --pool_compare coverage: kept coverage's farthest-camera picks, which cover "
+                             f"{spread_covers:.6g} of the objective against greedy's {greedy_covers:.6g}")
         oracle.restore(after_greedy)
-        return Selection(greedy.ids, greedy.gains, conservative)
+        return Selection(greedy.ids, greedy.gains, conservative,
+                         f"cover_pool --pool_compare coverage: kept greedy's picks, which cover {greedy_covers:.6g} "
+                         f"of the objective against coverage's farthest-camera picks' {spread_covers:.6g}")

@@ -60,12 +60,13 @@ def same_history(a_dir: Path, b_dir: Path) -> list[dict]:
         at_parting = [abs(a_runs[s]["stages"][stage]["test_psnr"] - b_runs[s]["stages"][stage]["test_psnr"])
                       for s in members if stage < len(a_runs[s]["stages"])]
         parted_views = len(a_runs[members[0]]["stages"][stage]["train_views"]) if at_parting else None
-        after = [psnr_after(a_runs[s]) for s in members], [psnr_after(b_runs[s]) for s in members]
-        for views in sorted(after[0][0]):
+        a_after = {s: psnr_after(a_runs[s]) for s in members}
+        b_after = {s: psnr_after(b_runs[s]) for s in members}
+        for views in sorted(a_after[members[0]]):
             if parted_views is not None and views <= parted_views:
                 continue
-            a_vals = {s: va[views] for s, va in zip(members, after[0]) if views in va}
-            b_vals = {s: vb[views] for s, vb in zip(members, after[1]) if views in vb}
+            a_vals = {s: values[views] for s, values in a_after.items() if views in values}
+            b_vals = {s: values[views] for s, values in b_after.items() if views in values}
             rows.append({"parting_stage": stage, "parting_views": parted_views, "seeds": members,
                          "model_gap": max(at_parting, default=0.0), "views": views,
                          "difference": paired_difference(a_vals, b_vals)})

@@ -130,17 +130,11 @@ def test_pool_weight_pixels_renders_each_pose_and_keeps_exact_greedy():
     assert sel.ids == reference.ids
 
 
-def random_points(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
-    g = torch.Generator().manual_seed(seed)
-    means = (torch.rand(n, 3, generator=g, dtype=torch.float64) * 2 - 1) * 1.2  # [n, 3]
-    return means, torch.rand(n, generator=g, dtype=torch.float64)  # [n] opacities
-
-
 @pytest.mark.parametrize("seed, spread_wins", [(2, True), (0, False)])
 def test_pool_compare_keeps_the_set_that_covers_more(seed, spread_wins):
     """Spiral poses, view 0 captured, K = 3: seed 2 is an instance where the farthest-camera picks cover more than
     greedy's (greedy is only a 1 - 1/e approximation), seed 0 one where greedy's do."""
-    (means, weights), cams = random_points(30, seed), spiral_cameras(16)
+    (means, weights, _), cams = scene(n=30, seed=seed), spiral_cameras(16)
     centers = torch.stack([c.camera_center for c in cams])  # [V, 3]
     pool = list(range(1, len(cams)))
     greedy = exhaustive_greedy(pool, 3, PoolCoverageOracle(means, weights, cams, [0]))

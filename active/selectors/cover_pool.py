@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from active.base import Selection, SelectionContext, check_k
+from active.base import Selection, SelectionContext
 from active.farthest_point import farthest_point_picks
 from active.oracle_counts import exhaustive_count
 from active.pool_cover_oracle import POOL_WEIGHTS
@@ -69,7 +69,6 @@ class CoverPoolSelector(LazyPopSelector):
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         if self.config.pool_compare == "none":
             return super().select(ctx, k)
-        check_k(k)
         oracle = ctx.oracle
         before = oracle.snapshot()
         greedy = super().select(ctx, k)  # commits greedy's picks

@@ -19,10 +19,15 @@ from utils.io import read_json
 LAYOUT = "pass run directories of a scripts/grid.py output (ROOT/SETUP/SCENE/METHOD/SEED)"
 
 
-def logged_argv(run_dir: Path) -> list[str]:
-    """The train.py arguments scripts/grid.py logged for `run_dir` (ROOT/SETUP/SCENE/METHOD/SEED)."""
+def check_grid_run(run_dir: Path) -> None:
+    """One error line unless `run_dir` has the depth of a grid run directory (ROOT/SETUP/SCENE/METHOD/SEED)."""
     if len(run_dir.parents) < 4:
         raise UserError(f"{run_dir} is not a grid run directory; {LAYOUT}")
+
+
+def logged_argv(run_dir: Path) -> list[str]:
+    """The train.py arguments scripts/grid.py logged for `run_dir` (ROOT/SETUP/SCENE/METHOD/SEED)."""
+    check_grid_run(run_dir)
     setup_dir, scene, method, seed = run_dir.parents[2], run_dir.parents[1].name, run_dir.parent.name, run_dir.name
     log = setup_dir / "logs" / scene / method / f"{seed}.log"
     if not log.is_file():

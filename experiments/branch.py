@@ -1,0 +1,114 @@
+"""Branch finished grid runs at their last acquisition: the same model, another selector's picks.
+
+A run saves its checkpoint right after each acquisition; the last one holds the model trained on the views before
+that acquisition (an acquisition adds views and writes the record; it leaves the model and optimiser alone unless
+`--stage_reset`). With that acquisition undone, train.py resumes the checkpoint with another selector: every branch
+of a run picks from the identical model and trains on from the identical random state, so the difference of the
+final test PSNRs is the pick's doing alone, at the cost of the last stage's training. A branch with the run's own
+(deterministic) selector reproduces the run (tested). CLI: scripts/branch_pick.py.
+
+Layout: OUT/SCENE/SPEC/SEED, a train.py model directory each, its `cfg_args` naming the run it branched from.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from experiments.method_spec import method_flags
+from experiments.paired import PairedDifference, difference_cells, paired_difference
+from experiments.replay import check_grid_run, logged_argv
+from training.config import parse_config
+from training.engine import training
+from utils.checkpoint import CHECKPOINT_FORMAT_VERSION, RunDirectory, load_checkpoint
+from utils.errors import UserError
+from utils.io import read_json, save_torch, write_json
+from utils.model_dir import CFG_ARGS, SELECTION, checkpoint_file
+
+
+def undo_last_acquisition(ckpt: dict[str, Any]) -> dict[str, Any]:
+    """The checkpoint as it was just before its last acquisition: that stage's picks and record removed."""
+    stages = ckpt["stages"]
+    if not stages or ckpt["stage"] != len(stages) or stages[-1]["iteration"] != ckpt["iteration"]:
+        raise UserError(f"the checkpoint at iteration {ckpt['iteration']} was not written by an acquisition; "
+                        "branch a run whose newest checkpoint is its last acquisition's (a grid run of train.py)")
+    if ckpt["config"]["active"].get("stage_reset"):
+        raise UserError("the run resets the model at each acquisition (--stage_reset), so its checkpoint no longer "
+                        "holds the model the picks were made from; branch a run trained without --stage_reset")
+    picked = set(stages[-1]["selected"])
+    return {**ckpt, "stage": ckpt["stage"] - 1, "stages": stages[:-1], "view_stack": [],
+            "train_views": [v for v in ckpt["train_views"] if v not in picked]}
+
+
+def check_branchable(run_dir: Path) -> None:
+    """One error line unless `run_dir` is a grid run with a checkpoint (checked before any branch trains)."""
+    check_grid_run(run_dir)
+    if not RunDirectory(run_dir).checkpoints():
+        raise UserError(f"{run_dir} has no checkpoint to branch from; pass a finished grid run (ROOT/SETUP/SCENE/"
+                        "METHOD/SEED)")
+
+
+def last_acquisition(run_dir: Path) -> dict[str, Any]:
+    """The newest checkpoint of a finished run, which is its last acquisition's."""
+    check_branchable(run_dir)
+    return load_checkpoint(RunDirectory(run_dir).checkpoints()[-1][1])
+
+
+def branch_dir(out: Path, run_dir: Path, spec: str) -> Path:
+    """OUT/SCENE/SPEC/SEED for a grid run ROOT/SETUP/SCENE/METHOD/SEED."""
+    return out / run_dir.parents[1].name / spec / run_dir.name
+
+
+def run_branch(run_dir: Path, spec: str, out: Path) -> Path:
+    """Train the branch of `run_dir` whose last pick is `spec`'s (resumed if it was interrupted, skipped if done);
+    returns its model directory."""
+    check_branchable(run_dir)
+    target = branch_dir(out, run_dir, spec)
+    start = None if RunDirectory(target).checkpoints() else undo_last_acquisition(last_acquisition(run_dir))
+    argv = logged_argv(run_dir)
+    argv[argv.index("-m") + 1] = str(target)
+    cfg = parse_config([*argv, "--quiet", *method_flags(spec)])
+    if start is not None:
+        target.mkdir(parents=True, exist_ok=True)
+        write_json(target / CFG_ARGS, {**cfg.to_dict(), "branch_of": str(run_dir), "branch_iteration":
+                                       start["iteration"]})
+        save_torch(checkpoint_file(target, start["iteration"]),
+                   {**start, "format_version": CHECKPOINT_FORMAT_VERSION, "config": cfg.to_dict()})
+    training(cfg)
+    return target
+
+
+def final_psnr(model_dir: Path) -> float:
+    """The final test PSNR a finished run recorded in selection.json."""
+    record = read_json(model_dir / SELECTION, what="selection record", fix="finish the run first")
+    if not record.get("final"):
+        raise UserError(f"{model_dir} has not finished (no final record in {SELECTION}); run it again to resume")
+    return record["final"]["test_psnr"]
+
+
+def branch_rows(runs: list[Path], specs: list[str], out: Path) -> list[dict]:
+    """Per scene and spec: the branches' final PSNRs by seed, the runs' own, and the paired difference branch - run."""
+    rows = []
+    scenes = sorted({r.parents[1].name for r in runs})
+    for scene in scenes:
+        sources = {int(r.name[4:]): final_psnr(r) for r in runs if r.parents[1].name == scene}
+        for spec in specs:
+            done = {int(r.name[4:]): final_psnr(branch_dir(out, r, spec)) for r in runs
+                    if r.parents[1].name == scene and RunDirectory(branch_dir(out, r, spec)).is_complete()}
+            if done:
+                rows.append({"scene": scene, "spec": spec, "psnr": done, "source": sources,
+                             "difference": paired_difference(done, sources)})
+    return rows
+
+
+def branch_table(rows: list[dict], source_name: str) -> str:
+    """Markdown of `branch_rows`: each branch's mean final PSNR and its paired difference to the run it branched."""
+    lines = [f"| scene | last pick by | final PSNR | {source_name} (same seeds) | seeds | pick − {source_name} (mean) | "
+             "95% interval | seeds above / below | resolved |", "|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        d: PairedDifference = row["difference"]
+        seeds = sorted(row["psnr"])
+        mean_branch = sum(row["psnr"][s] for s in seeds) / len(seeds)
+        mean_source = sum(row["source"][s] for s in seeds) / len(seeds)
+        lines.append(f"| {row['scene']} | {row['spec']} | {mean_branch:.2f} | {mean_source:.2f} | "
+                     + " | ".join(difference_cells(d)) + " |")
+    return "\n".join(lines)

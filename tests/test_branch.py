@@ -1,0 +1,72 @@
+"""scripts/branch_pick.py (experiments/branch.py): undoing the last acquisition of a checkpoint; a branch with the
+run's own deterministic selector reproduces the run to the last digit, a branch with another selector keeps the
+run's history and changes only the last pick; bad input."""
+import json
+import subprocess
+import sys
+
+import pytest
+
+from experiments.branch import undo_last_acquisition
+from tests.conftest import ROOT
+from tests.test_selection_fit import ENV, script
+from utils.errors import UserError
+
+
+def checkpoint(stage_reset: bool = False) -> dict:
+    stages = [{"iteration": 20, "selected": [5, 6]}, {"iteration": 50, "selected": [1, 9]}]
+    return {"iteration": 50, "stage": 2, "stages": stages, "train_views": [0, 3, 5, 6, 1, 9], "view_stack": [4],
+            "config": {"active": {"stage_reset": stage_reset}}}
+
+
+def test_undo_removes_the_last_picks_and_their_record():
+    undone = undo_last_acquisition(checkpoint())
+    assert undone["stage"] == 1 and undone["stages"] == checkpoint()["stages"][:1]
+    assert undone["train_views"] == [0, 3, 5, 6] and undone["view_stack"] == [] and undone["iteration"] == 50
+
+
+@pytest.mark.parametrize("change, expected", [
+    ({"iteration": 60}, "was not written by an acquisition"),
+    ({"stage": 1}, "was not written by an acquisition"),
+    ({"config": {"active": {"stage_reset": True}}}, "--stage_reset"),
+])
+def test_undo_refuses_a_checkpoint_it_cannot_undo(change, expected):
+    with pytest.raises(UserError, match=expected):
+        undo_last_acquisition({**checkpoint(), **change})
+
+
+@pytest.mark.slow
+def test_a_branch_with_the_runs_own_selector_is_the_run(tiny_scene, tmp_path):
+    out = tmp_path / "out"
+    r = script("grid.py", "--setup", "setup1", "--data", str(tiny_scene.parent), "--scenes", tiny_scene.name,
+               "--methods", "coverage", "--seeds", "1", "--out", str(out), "--launcher", "local", "--threads", "1",
+               "--iter_scale", "0.005", "--num_points", "150", "--resolution", "-1", "--device", "cpu", "--",
+               "--sh_degree", "1")
+    assert r.returncode == 0, r.stdout + r.stderr
+    run = out / "setup1" / tiny_scene.name / "coverage" / "seed0"
+    branches = tmp_path / "branches"
+    r = script("branch_pick.py", str(run), "--specs", "coverage", "random", "--out", str(branches))
+    assert r.returncode == 0, r.stdout + r.stderr
+    original = json.loads((run / "selection.json").read_text())
+    same = json.loads((branches / tiny_scene.name / "coverage" / "seed0" / "selection.json").read_text())
+    other = json.loads((branches / tiny_scene.name / "random" / "seed0" / "selection.json").read_text())
+    assert [s["selected"] for s in same["stages"]] == [s["selected"] for s in original["stages"]]
+    assert same["final"]["test_psnr"] == original["final"]["test_psnr"]  # bit for bit: the same model, state, picks
+    assert [s["selected"] for s in other["stages"][:-1]] == [s["selected"] for s in original["stages"][:-1]]
+    assert other["stages"][-1]["test_psnr"] == original["stages"][-1]["test_psnr"]  # picked from the same model
+    assert other["stages"][-1]["selected"] != original["stages"][-1]["selected"]
+    assert f"| {tiny_scene.name} | coverage | " in r.stdout and "| 1 | +0.00 | – | 0 / 0 | no |" in r.stdout
+    rerun = script("branch_pick.py", str(run), "--specs", "coverage", "--out", str(branches))  # finished: skipped
+    assert rerun.returncode == 0 and "already finished" in rerun.stdout, rerun.stdout + rerun.stderr
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["seed0", "--specs", "coverage", "--out", "b"], "seed0 is not a grid run directory"),
+    (["r/s/sc/m/seed0", "--specs", "coverage", "--out", "b"], "has no checkpoint to branch from"),
+])
+def test_bad_input_is_one_error_line(tmp_path, args, expected):
+    (tmp_path / "r/s/sc/m/seed0").mkdir(parents=True)
+    r = subprocess.run([sys.executable, str(ROOT / "scripts" / "branch_pick.py"), *args], capture_output=True,
+                       text=True, env=ENV, cwd=tmp_path, timeout=120)
+    assert r.returncode != 0 and r.stderr.strip().startswith("error:") and expected in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1

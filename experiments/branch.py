@@ -86,29 +86,37 @@ def final_psnr(model_dir: Path) -> float:
 
 
 def branch_rows(runs: list[Path], specs: list[str], out: Path) -> list[dict]:
-    """Per scene and spec: the branches' final PSNRs by seed, the runs' own, and the paired difference branch - run."""
+    """Per scene, method the runs came from, and spec: the finished branches' final PSNRs by seed and the runs' own
+    (JSON-ready but for the integer seed keys; `rows_from_json` reads them back)."""
+    groups: dict[tuple[str, str], list[Path]] = {}
+    for run in runs:
+        groups.setdefault((run.parents[1].name, run.parent.name), []).append(run)
     rows = []
-    scenes = sorted({r.parents[1].name for r in runs})
-    for scene in scenes:
-        sources = {int(r.name[4:]): final_psnr(r) for r in runs if r.parents[1].name == scene}
+    for (scene, method), members in sorted(groups.items()):
+        sources = {int(r.name[4:]): final_psnr(r) for r in members}
         for spec in specs:
-            done = {int(r.name[4:]): final_psnr(branch_dir(out, r, spec)) for r in runs
-                    if r.parents[1].name == scene and RunDirectory(branch_dir(out, r, spec)).is_complete()}
+            done = {int(r.name[4:]): final_psnr(branch_dir(out, r, spec)) for r in members
+                    if RunDirectory(branch_dir(out, r, spec)).is_complete()}
             if done:
-                rows.append({"scene": scene, "spec": spec, "psnr": done, "source": sources,
-                             "difference": paired_difference(done, sources)})
+                rows.append({"scene": scene, "source_method": method, "spec": spec, "psnr": done, "source": sources})
     return rows
 
 
-def branch_table(rows: list[dict], source_name: str) -> str:
+def rows_from_json(rows: list[dict]) -> list[dict]:
+    """`branch_rows` read back from JSON (whose object keys, the seeds, are strings)."""
+    return [{**row, "psnr": {int(s): v for s, v in row["psnr"].items()},
+             "source": {int(s): v for s, v in row["source"].items()}} for row in rows]
+
+
+def branch_table(rows: list[dict]) -> str:
     """Markdown of `branch_rows`: each branch's mean final PSNR and its paired difference to the run it branched."""
-    lines = [f"| scene | last pick by | final PSNR | {source_name} (same seeds) | seeds | pick − {source_name} (mean) | "
-             "95% interval | seeds above / below | resolved |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| scene | runs of | last pick by | final PSNR | the runs' (same seeds) | seeds | pick − run (mean) | "
+             "95% interval | seeds above / below | resolved |", "|---|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
-        d: PairedDifference = row["difference"]
+        d: PairedDifference = paired_difference(row["psnr"], row["source"])
         seeds = sorted(row["psnr"])
         mean_branch = sum(row["psnr"][s] for s in seeds) / len(seeds)
         mean_source = sum(row["source"][s] for s in seeds) / len(seeds)
-        lines.append(f"| {row['scene']} | {row['spec']} | {mean_branch:.2f} | {mean_source:.2f} | "
+        lines.append(f"| {row['scene']} | {row['source_method']} | {row['spec']} | {mean_branch:.2f} | {mean_source:.2f} | "
                      + " | ".join(difference_cells(d)) + " |")
     return "\n".join(lines)

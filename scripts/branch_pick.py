@@ -3,7 +3,8 @@
 final PSNR differences are the last pick's alone.
 
     python scripts/branch_pick.py output/paper_stages_auto/setup1/mic/auto/seed* \\
-        --specs coverage cover_pool --out output/branch_mic [--table-only]
+        --specs coverage cover_pool --out output/branch_mic [--table-only] [--json rows.json]
+    python scripts/branch_pick.py --table rows.json
 """
 from __future__ import annotations
 
@@ -13,19 +14,28 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
-from experiments.branch import branch_rows, branch_table, check_branchable, run_branch
-from utils.errors import run_cli
+from experiments.branch import branch_rows, branch_table, check_branchable, rows_from_json, run_branch
+from experiments.replay import saved_rows
+from utils.errors import UserError, run_cli
+from utils.io import write_json
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("runs", type=Path, nargs="+", help="finished grid runs (ROOT/SETUP/SCENE/METHOD/SEED)")
-    p.add_argument("--specs", nargs="+", required=True,
+    p.add_argument("runs", type=Path, nargs="*", help="finished grid runs (ROOT/SETUP/SCENE/METHOD/SEED)")
+    p.add_argument("--specs", nargs="+",
                    help="selectors for the last pick, NAME[+OPTION=VALUE...] (e.g. pop_gs+gain_weight=opacity)")
-    p.add_argument("--out", type=Path, required=True, help="folder of the branches (OUT/SCENE/SPEC/SEED)")
+    p.add_argument("--out", type=Path, help="folder of the branches (OUT/SCENE/SPEC/SEED)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (default 1: two of these side by side)")
-    p.add_argument("--table-only", action="store_true", help="train nothing; print the table of the finished branches")
+    p.add_argument("--table-only", action="store_true", help="train nothing; tabulate the finished branches")
+    p.add_argument("--json", type=Path, help="also write the table's rows (every seed's PSNRs) to this file")
+    p.add_argument("--table", type=Path, metavar="JSON", help="print the table of rows written with --json; no runs")
     args = p.parse_args()
+    if args.table is not None:
+        print(branch_table(rows_from_json(saved_rows(args.table, "branch rows"))))
+        return
+    if not args.runs or not args.specs or args.out is None:
+        raise UserError("pass finished grid runs, --specs and --out (or --table ROWS.json)")
     torch.set_num_threads(args.threads)
     for run in args.runs:
         check_branchable(run)
@@ -33,8 +43,10 @@ def main() -> None:
         jobs = [(run, spec) for run in args.runs for spec in args.specs]
         for run, spec in tqdm(jobs, desc="branches", unit="run"):
             run_branch(run, spec, args.out)
-    source = args.runs[0].parent.name
-    print(branch_table(branch_rows(args.runs, args.specs, args.out), source))
+    rows = branch_rows(args.runs, args.specs, args.out)
+    if args.json is not None:
+        write_json(args.json, rows)
+    print(branch_table(rows))
 
 
 if __name__ == "__main__":

@@ -45,7 +45,8 @@ def test_a_branch_with_the_runs_own_selector_is_the_run(tiny_scene, tmp_path):
     assert r.returncode == 0, r.stdout + r.stderr
     run = out / "setup1" / tiny_scene.name / "coverage" / "seed0"
     branches = tmp_path / "branches"
-    r = script("branch_pick.py", str(run), "--specs", "coverage", "random", "--out", str(branches))
+    rows = tmp_path / "rows.json"
+    r = script("branch_pick.py", str(run), "--specs", "coverage", "random", "--out", str(branches), "--json", str(rows))
     assert r.returncode == 0, r.stdout + r.stderr
     original = json.loads((run / "selection.json").read_text())
     same = json.loads((branches / tiny_scene.name / "coverage" / "seed0" / "selection.json").read_text())
@@ -55,7 +56,10 @@ def test_a_branch_with_the_runs_own_selector_is_the_run(tiny_scene, tmp_path):
     assert [s["selected"] for s in other["stages"][:-1]] == [s["selected"] for s in original["stages"][:-1]]
     assert other["stages"][-1]["test_psnr"] == original["stages"][-1]["test_psnr"]  # picked from the same model
     assert other["stages"][-1]["selected"] != original["stages"][-1]["selected"]
-    assert f"| {tiny_scene.name} | coverage | " in r.stdout and "| 1 | +0.00 | – | 0 / 0 | no |" in r.stdout
+    row = f"| {tiny_scene.name} | coverage | coverage | "
+    assert row in r.stdout and "| 1 | +0.00 | – | 0 / 0 | no |" in r.stdout, r.stdout
+    again = script("branch_pick.py", "--table", str(rows))
+    assert again.returncode == 0 and again.stdout.strip() in r.stdout and row in again.stdout, again.stdout + again.stderr
     rerun = script("branch_pick.py", str(run), "--specs", "coverage", "--out", str(branches))  # finished: skipped
     assert rerun.returncode == 0 and "already finished" in rerun.stdout, rerun.stdout + rerun.stderr
 
@@ -63,6 +67,8 @@ def test_a_branch_with_the_runs_own_selector_is_the_run(tiny_scene, tmp_path):
 @pytest.mark.parametrize("args, expected", [
     (["seed0", "--specs", "coverage", "--out", "b"], "seed0 is not a grid run directory"),
     (["r/s/sc/m/seed0", "--specs", "coverage", "--out", "b"], "has no checkpoint to branch from"),
+    (["r/s/sc/m/seed0"], "pass finished grid runs, --specs and --out"),
+    (["--table", "missing.json"], "missing.json not found"),
 ])
 def test_bad_input_is_one_error_line(tmp_path, args, expected):
     (tmp_path / "r/s/sc/m/seed0").mkdir(parents=True)

@@ -9,7 +9,7 @@ import pytest
 
 from experiments.branch import undo_last_acquisition
 from tests.conftest import ROOT
-from tests.test_selection_fit import ENV, script
+from tests.test_selection_fit import ENV, script, tiny_grid
 from utils.errors import UserError
 
 
@@ -37,13 +37,7 @@ def test_undo_refuses_a_checkpoint_it_cannot_undo(change, expected):
 
 @pytest.mark.slow
 def test_a_branch_with_the_runs_own_selector_is_the_run(tiny_scene, tmp_path):
-    out = tmp_path / "out"
-    r = script("grid.py", "--setup", "setup1", "--data", str(tiny_scene.parent), "--scenes", tiny_scene.name,
-               "--methods", "coverage", "--seeds", "1", "--out", str(out), "--launcher", "local", "--threads", "1",
-               "--iter_scale", "0.005", "--num_points", "150", "--resolution", "-1", "--device", "cpu", "--",
-               "--sh_degree", "1")
-    assert r.returncode == 0, r.stdout + r.stderr
-    run = out / "setup1" / tiny_scene.name / "coverage" / "seed0"
+    run = tiny_grid(tiny_scene, tmp_path / "out", "coverage") / "coverage" / "seed0"
     branches = tmp_path / "branches"
     rows = tmp_path / "rows.json"
     r = script("branch_pick.py", str(run), "--specs", "coverage", "random", "--out", str(branches), "--json", str(rows))

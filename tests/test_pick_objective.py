@@ -13,7 +13,7 @@ from scene.gaussian_model import GaussianModel
 from tests.conftest import ROOT
 from tests.test_cover_pool import reference_objective
 from tests.test_fisher_cache import spiral_cameras
-from tests.test_selection_fit import ENV, script
+from tests.test_selection_fit import ENV, script, tiny_grid
 
 
 def test_covered_share_is_the_objective_drop_written_out():
@@ -29,13 +29,7 @@ def test_covered_share_is_the_objective_drop_written_out():
 
 @pytest.mark.slow
 def test_a_grid_run_replays_to_its_recorded_picks(tiny_scene, tmp_path):
-    out = tmp_path / "out"
-    r = script("grid.py", "--setup", "setup1", "--data", str(tiny_scene.parent), "--scenes", tiny_scene.name,
-               "--methods", "cover_pool", "coverage", "--seeds", "1", "--out", str(out), "--launcher", "local", "--threads", "1",
-               "--iter_scale", "0.005", "--num_points", "150", "--resolution", "-1", "--device", "cpu", "--",
-               "--sh_degree", "1")
-    assert r.returncode == 0, r.stdout + r.stderr
-    run = out / "setup1" / tiny_scene.name / "cover_pool" / "seed0"
+    run = tiny_grid(tiny_scene, tmp_path / "out", "cover_pool", "coverage") / "cover_pool" / "seed0"
     rows_path = tmp_path / "rows.json"
     r = script("pick_objective.py", str(run), "--json", str(rows_path))
     assert r.returncode == 0, r.stdout + r.stderr

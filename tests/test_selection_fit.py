@@ -5,6 +5,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -18,15 +19,19 @@ def script(name: str, *args: str, timeout: int = 600) -> subprocess.CompletedPro
                           env=ENV, timeout=timeout)
 
 
-@pytest.mark.slow
-def test_replayed_fit_equals_the_recorded_one(tiny_scene, tmp_path):
-    out = tmp_path / "out"
-    r = script("grid.py", "--setup", "setup1", "--data", str(tiny_scene.parent), "--scenes", tiny_scene.name,
-               "--methods", "coverage", "--seeds", "1", "--out", str(out), "--launcher", "local", "--threads", "1",
+def tiny_grid(scene: Path, out: Path, *methods: str) -> Path:
+    """A one-seed Setup 1 grid of `methods` on the tiny scene (seconds); returns its scene folder OUT/setup1/SCENE."""
+    r = script("grid.py", "--setup", "setup1", "--data", str(scene.parent), "--scenes", scene.name,
+               "--methods", *methods, "--seeds", "1", "--out", str(out), "--launcher", "local", "--threads", "1",
                "--iter_scale", "0.005", "--num_points", "150", "--resolution", "-1", "--device", "cpu", "--",
                "--sh_degree", "1")
     assert r.returncode == 0, r.stdout + r.stderr
-    run = out / "setup1" / tiny_scene.name / "coverage" / "seed0"
+    return out / "setup1" / scene.name
+
+
+@pytest.mark.slow
+def test_replayed_fit_equals_the_recorded_one(tiny_scene, tmp_path):
+    run = tiny_grid(tiny_scene, tmp_path / "out", "coverage") / "coverage" / "seed0"
     rows_path = tmp_path / "rows.json"
     r = script("selection_fit.py", str(run), "--json", str(rows_path))
     assert r.returncode == 0, r.stdout + r.stderr

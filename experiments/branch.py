@@ -7,7 +7,8 @@ of a run picks from the identical model and trains on from the identical random 
 final test PSNRs is the pick's doing alone, at the cost of the last stage's training. A branch with the run's own
 (deterministic) selector reproduces the run (tested). CLI: scripts/branch_pick.py.
 
-Layout: OUT/SCENE/SPEC/SEED, a train.py model directory each, its `cfg_args` naming the run it branched from.
+Layout: OUT/SCENE/METHOD/SPEC/SEED (METHOD: the runs' own), a train.py model directory each, its `cfg_args` naming
+the run it branched from.
 """
 from __future__ import annotations
 
@@ -54,8 +55,8 @@ def last_acquisition(run_dir: Path) -> dict[str, Any]:
 
 
 def branch_dir(out: Path, run_dir: Path, spec: str) -> Path:
-    """OUT/SCENE/SPEC/SEED for a grid run ROOT/SETUP/SCENE/METHOD/SEED."""
-    return out / run_dir.parents[1].name / spec / run_dir.name
+    """OUT/SCENE/METHOD/SPEC/SEED for a grid run ROOT/SETUP/SCENE/METHOD/SEED."""
+    return out / run_dir.parents[1].name / run_dir.parent.name / spec / run_dir.name
 
 
 def run_branch(run_dir: Path, spec: str, out: Path) -> Path:

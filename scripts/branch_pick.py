@@ -25,7 +25,7 @@ def main() -> None:
     p.add_argument("runs", type=Path, nargs="*", help="finished grid runs (ROOT/SETUP/SCENE/METHOD/SEED)")
     p.add_argument("--specs", nargs="+",
                    help="selectors for the last pick, NAME[+OPTION=VALUE...] (e.g. pop_gs+gain_weight=opacity)")
-    p.add_argument("--out", type=Path, help="folder of the branches (OUT/SCENE/SPEC/SEED)")
+    p.add_argument("--out", type=Path, help="folder of the branches (OUT/SCENE/METHOD/SPEC/SEED)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (default 1: two of these side by side)")
     p.add_argument("--table-only", action="store_true", help="train nothing; tabulate the finished branches")
     p.add_argument("--json", type=Path, help="also write the table's rows (every seed's PSNRs) to this file")

@@ -43,8 +43,8 @@ def test_a_branch_with_the_runs_own_selector_is_the_run(tiny_scene, tmp_path):
     r = script("branch_pick.py", str(run), "--specs", "coverage", "random", "--out", str(branches), "--json", str(rows))
     assert r.returncode == 0, r.stdout + r.stderr
     original = json.loads((run / "selection.json").read_text())
-    same = json.loads((branches / tiny_scene.name / "coverage" / "seed0" / "selection.json").read_text())
-    other = json.loads((branches / tiny_scene.name / "random" / "seed0" / "selection.json").read_text())
+    same = json.loads((branches / tiny_scene.name / "coverage" / "coverage" / "seed0" / "selection.json").read_text())
+    other = json.loads((branches / tiny_scene.name / "coverage" / "random" / "seed0" / "selection.json").read_text())
     assert [s["selected"] for s in same["stages"]] == [s["selected"] for s in original["stages"]]
     assert same["final"]["test_psnr"] == original["final"]["test_psnr"]  # bit for bit: the same model, state, picks
     assert [s["selected"] for s in other["stages"][:-1]] == [s["selected"] for s in original["stages"][:-1]]

@@ -101,6 +101,7 @@ class ActiveConfig:
     method: str = field(default="", metadata=_flag(None, "view selector; empty = train on all training views"))
     num_init_views: int = field(default=2, metadata=_flag(None, "seed views (farthest-point sampling from view 0)"))
     init_views: tuple[int, ...] = field(default=(), metadata=_flag(None, "explicit seed view ids (overrides --num_init_views)"))
+    exclude_views: tuple[int, ...] = field(default=(), metadata=_flag(None, "view ids never offered to the selector nor seeded (poses that cannot be captured)"))
     views_per_step: int = field(default=3, metadata=_flag(None, "K: views added per acquisition step"))
     max_views: int = field(default=11, metadata=_flag(None, "view budget (training views at the end)"))
     iters_per_view: int = field(default=100, metadata=_flag(None, "stage length = iters_per_view x current #views"))

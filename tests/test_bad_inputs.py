@@ -95,6 +95,16 @@ def setup_seed_set_over_pool(tiny_scene, tmp):
              "--max_views", "14"], "--num_init_views")
 
 
+def setup_excluded_view_outside_pool(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--exclude_views", "3", "99"], \
+        "--exclude_views must be distinct view ids"
+
+
+def setup_excluded_seed_view(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--init_views", "0", "5",
+            "--exclude_views", "5"], "also in --exclude_views"
+
+
 def setup_unknown_method(tiny_scene, tmp):
     return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), "--method", "greedy"], "choose one of"
 

@@ -24,26 +24,37 @@ from training.step import mean_psnr
 from utils.errors import UserError
 
 
+def allowed_views(cfg: TrainConfig, pool: int) -> list[int]:
+    """The training view ids a run may seed or pick: all but --exclude_views (checked: distinct ids in the pool)."""
+    excluded = cfg.active.exclude_views
+    if any(not 0 <= v < pool for v in excluded) or len(set(excluded)) != len(excluded):
+        raise UserError(f"--exclude_views must be distinct view ids in [0, {pool}); got {list(excluded)}")
+    return [v for v in range(pool) if v not in set(excluded)]
+
+
 def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
-    """Seed views: --init_views, or farthest-point sampling of camera centres from view 0."""
+    """Seed views: --init_views, or farthest-point sampling of the allowed views' camera centres from the first."""
     pool = len(scene.train_cameras)
     a = cfg.active
+    allowed = allowed_views(cfg, pool)
     if a.init_views:
         bad = [v for v in a.init_views if not 0 <= v < pool]
         if bad or len(set(a.init_views)) != len(a.init_views):
             raise UserError(f"--init_views must be distinct view ids in [0, {pool}); got {list(a.init_views)}")
+        if excluded := sorted(set(a.init_views) & set(a.exclude_views)):
+            raise UserError(f"--init_views {excluded} are also in --exclude_views; seed from views that can be captured")
         return list(a.init_views)
-    centers = torch.stack([c.camera_center.cpu() for c in scene.train_cameras])
-    return farthest_point_views(centers, a.num_init_views)
+    centers = torch.stack([scene.train_cameras[v].camera_center.cpu() for v in allowed])
+    return [allowed[i] for i in farthest_point_views(centers, a.num_init_views)]
 
 
 def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: Selector, k: int,
                   background: torch.Tensor, settings: RasterSettings) -> dict[str, Any]:
     """The training run's acquisition step: `active.acquisition.run_selection` over the training cameras not trained
-    on yet (seeded by --seed and the stage) by the selector `selector.for_step` chooses for this step (itself, but
+    on yet and not excluded (seeded by --seed and the stage) by the selector `selector.for_step` chooses for this step (itself, but
     for `auto`), its Fisher pass checked against the available memory first (`fit_selection_memory`); returns the
     stage record for selection.json (with the rule line of a selector that has one)."""
-    candidates = [v for v in range(len(scene.train_cameras)) if v not in state.train_views]
+    candidates = [v for v in allowed_views(cfg, len(scene.train_cameras)) if v not in state.train_views]
     choice = selector.for_step(len(state.train_views), model_iterations(state, cfg))
     used = choice.selector
     fisher = fit_selection_memory(cfg, used, state.gaussians, scene.train_cameras, len(candidates))

@@ -26,7 +26,7 @@ from gaussian_renderer import RasterSettings
 from scene.resolution_policy import training_resolution
 from scene.scene import Scene
 from scene.trained import background_color, raster_settings
-from training.acquisition import acquire_views, check_memory_before_training, seed_views
+from training.acquisition import acquire_views, allowed_views, check_memory_before_training, seed_views
 from training.config import TrainConfig, default_model_path, make_selector
 from training.optim import PositionLRSchedule
 from training.state import TrainState, capture_state, fresh_state, restore_state
@@ -108,7 +108,8 @@ def _open_run(cfg: TrainConfig, model_path: str) -> Run:
         if resolution.notice:
             print(resolution.notice)
     scene = Scene.from_config(cfg.model, model_path)
-    plan = make_plan(cfg, len(scene.train_cameras))
+    views = len(scene.train_cameras)
+    plan = make_plan(cfg, len(allowed_views(cfg, views)) if cfg.active.method else views)
     seed_everything(cfg.run.seed)
     rng = random.Random(cfg.run.seed)
     checkpoint = run_dir.latest_checkpoint()

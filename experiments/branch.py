@@ -59,19 +59,24 @@ def branch_dir(out: Path, run_dir: Path, spec: str) -> Path:
     return out / run_dir.parents[1].name / run_dir.parent.name / spec / run_dir.name
 
 
-def run_branch(run_dir: Path, spec: str, out: Path) -> Path:
-    """Train the branch of `run_dir` whose last pick is `spec`'s (resumed if it was interrupted, skipped if done);
-    returns its model directory."""
+def run_branch(run_dir: Path, spec: str, out: Path, train_args: tuple[str, ...] = ()) -> Path:
+    """Train the branch of `run_dir` whose last pick is `spec`'s, with `train_args` (extra train.py flags, e.g.
+    --exclude_views) after the run's own (resumed if it was interrupted, skipped if done); returns its model
+    directory. A branch folder made with other `train_args` is refused (one --out per set of extra flags)."""
     check_branchable(run_dir)
     target = branch_dir(out, run_dir, spec)
+    earlier = read_json(target / CFG_ARGS, missing="none", damaged="none")
+    if earlier is not None and earlier.get("branch_train_args", []) != list(train_args):
+        raise UserError(f"{target} was branched with train.py flags {earlier.get('branch_train_args', [])}, not "
+                        f"{list(train_args)}; give these flags their own --out")
     start = None if RunDirectory(target).checkpoints() else undo_last_acquisition(last_acquisition(run_dir))
     argv = logged_argv(run_dir)
     argv[argv.index("-m") + 1] = str(target)
-    cfg = parse_config([*argv, "--quiet", *method_flags(spec)])
+    cfg = parse_config([*argv, "--quiet", *train_args, *method_flags(spec)])
     if start is not None:
         target.mkdir(parents=True, exist_ok=True)
         write_json(target / CFG_ARGS, {**cfg.to_dict(), "branch_of": str(run_dir), "branch_iteration":
-                                       start["iteration"]})
+                                       start["iteration"], "branch_train_args": list(train_args)})
         save_torch(checkpoint_file(target, start["iteration"]),
                    {**start, "format_version": CHECKPOINT_FORMAT_VERSION, "config": cfg.to_dict()})
     training(cfg)
@@ -86,7 +91,7 @@ def final_psnr(model_dir: Path) -> float:
     return record["final"]["test_psnr"]
 
 
-def branch_rows(runs: list[Path], specs: list[str], out: Path) -> list[dict]:
+def branch_rows(runs: list[Path], specs: list[str], out: Path, train_args: tuple[str, ...] = ()) -> list[dict]:
     """Per scene, method the runs came from, and spec: the finished branches' final PSNRs by seed and the runs' own
     (JSON-ready but for the integer seed keys; `rows_from_json` reads them back)."""
     groups: dict[tuple[str, str], list[Path]] = {}
@@ -99,7 +104,8 @@ def branch_rows(runs: list[Path], specs: list[str], out: Path) -> list[dict]:
             done = {int(r.name[4:]): final_psnr(branch_dir(out, r, spec)) for r in members
                     if RunDirectory(branch_dir(out, r, spec)).is_complete()}
             if done:
-                rows.append({"scene": scene, "source_method": method, "spec": spec, "psnr": done, "source": sources})
+                rows.append({"scene": scene, "source_method": method, "spec": spec, "train_args": " ".join(train_args),
+                             "psnr": done, "source": sources})
     return rows
 
 
@@ -118,6 +124,7 @@ def branch_table(rows: list[dict]) -> str:
         seeds = sorted(row["psnr"])
         mean_branch = sum(row["psnr"][s] for s in seeds) / len(seeds)
         mean_source = sum(row["source"][s] for s in seeds) / len(seeds)
-        lines.append(f"| {row['scene']} | {row['source_method']} | {row['spec']} | {mean_branch:.2f} | {mean_source:.2f} | "
+        pick = f"{row['spec']} {row['train_args']}" if row.get("train_args") else row["spec"]
+        lines.append(f"| {row['scene']} | {row['source_method']} | {pick} | {mean_branch:.2f} | {mean_source:.2f} | "
                      + " | ".join(difference_cells(d)) + " |")
     return "\n".join(lines)

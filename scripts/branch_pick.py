@@ -9,6 +9,7 @@ final PSNR differences are the last pick's alone.
 from __future__ import annotations
 
 import argparse
+import shlex
 from pathlib import Path
 
 import torch
@@ -26,6 +27,8 @@ def main() -> None:
     p.add_argument("--specs", nargs="+",
                    help="selectors for the last pick, NAME[+OPTION=VALUE...] (e.g. pop_gs+gain_weight=opacity)")
     p.add_argument("--out", type=Path, help="folder of the branches (OUT/SCENE/METHOD/SPEC/SEED)")
+    p.add_argument("--train_args", default="", metavar="FLAGS",
+                   help='extra train.py flags for every branch, quoted (e.g. "--exclude_views 3 17"); use their own --out')
     p.add_argument("--threads", type=int, default=1, help="torch threads (default 1: two of these side by side)")
     p.add_argument("--table-only", action="store_true", help="train nothing; tabulate the finished branches")
     p.add_argument("--json", type=Path, help="also write the table's rows (every seed's PSNRs) to this file")
@@ -37,13 +40,14 @@ def main() -> None:
     if not args.runs or not args.specs or args.out is None:
         raise UserError("pass finished grid runs, --specs and --out (or --table ROWS.json)")
     torch.set_num_threads(args.threads)
+    train_args = tuple(shlex.split(args.train_args))
     for run in args.runs:
         check_branchable(run)
     if not args.table_only:
         jobs = [(run, spec) for run in args.runs for spec in args.specs]
         for run, spec in tqdm(jobs, desc="branches", unit="run"):
-            run_branch(run, spec, args.out)
-    rows = branch_rows(args.runs, args.specs, args.out)
+            run_branch(run, spec, args.out, train_args)
+    rows = branch_rows(args.runs, args.specs, args.out, train_args)
     if args.json is not None:
         write_json(args.json, rows)
     print(branch_table(rows))

@@ -56,6 +56,9 @@ def test_a_branch_with_the_runs_own_selector_is_the_run(tiny_scene, tmp_path):
     assert again.returncode == 0 and again.stdout.strip() in r.stdout and row in again.stdout, again.stdout + again.stderr
     rerun = script("branch_pick.py", str(run), "--specs", "coverage", "--out", str(branches))  # finished: skipped
     assert rerun.returncode == 0 and "already finished" in rerun.stdout, rerun.stdout + rerun.stderr
+    mixed = script("branch_pick.py", str(run), "--specs", "coverage", "--out", str(branches),
+                   "--train_args=--exclude_views 1")  # other train.py flags never land in a folder made without them
+    assert mixed.returncode != 0 and "give these flags their own --out" in mixed.stderr, mixed.stderr
 
 
 @pytest.mark.parametrize("args, expected", [

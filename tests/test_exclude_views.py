@@ -23,4 +23,5 @@ def test_excluded_views_are_never_seeded_nor_picked(tiny_scene, tmp_path, method
     assert len(views) == 8 and not set(views) & set(excluded)
     assert all(s["candidates"] == 14 - 3 - len(s["train_views"]) for s in record["stages"])  # 14 views, 3 excluded
     assert record["config"]["exclude_views"] == excluded
+    assert "[stage 0] selecting 3 of 9 candidates" in r.stdout + r.stderr  # 14 views, 3 excluded, 2 seeds
     assert plain_views[0] == views[0] == 0  # farthest-point seeding still starts from the first allowed view

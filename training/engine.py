@@ -178,8 +178,8 @@ def acquire(run: Run, progress: tqdm) -> None:
     the stage checkpoint."""
     state, cfg = run.state, run.cfg
     k = run.plan.adds[state.stage]
-    progress.write(f"[stage {state.stage}] selecting {k} of {len(run.scene.train_cameras) - len(state.train_views)} "
-                   f"candidates with {cfg.active.method}")
+    candidates = len(set(allowed_views(cfg, len(run.scene.train_cameras))) - set(state.train_views))
+    progress.write(f"[stage {state.stage}] selecting {k} of {candidates} candidates with {cfg.active.method}")
     record = acquire_views(state, run.scene, cfg, run.selector, k, run.background, run.settings)
     for line in (record.get("rule"), record.get("note")):
         if line is not None:

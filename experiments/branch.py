@@ -115,6 +115,20 @@ def rows_from_json(rows: list[dict]) -> list[dict]:
              "source": {int(s): v for s, v in row["source"].items()}} for row in rows]
 
 
+def short_flags(flags: str, longest: int = 4) -> str:
+    """Flags for a table cell: a run of more than `longest` numbers becomes "(N ids)"."""
+    out, numbers = [], []
+    for word in [*flags.split(), ""]:  # "" ends the last run of numbers
+        if word.isdigit():
+            numbers.append(word)
+            continue
+        out += numbers if len(numbers) <= longest else [f"({len(numbers)} ids)"]
+        numbers = []
+        if word:
+            out.append(word)
+    return " ".join(out)
+
+
 def branch_table(rows: list[dict]) -> str:
     """Markdown of `branch_rows`: each branch's mean final PSNR and its paired difference to the run it branched."""
     lines = ["| scene | runs of | last pick by | final PSNR | the runs' (same seeds) | seeds | pick − run (mean) | "
@@ -124,7 +138,7 @@ def branch_table(rows: list[dict]) -> str:
         seeds = sorted(row["psnr"])
         mean_branch = sum(row["psnr"][s] for s in seeds) / len(seeds)
         mean_source = sum(row["source"][s] for s in seeds) / len(seeds)
-        pick = f"{row['spec']} {row['train_args']}" if row.get("train_args") else row["spec"]
+        pick = f"{row['spec']} {short_flags(row['train_args'])}" if row.get("train_args") else row["spec"]
         lines.append(f"| {row['scene']} | {row['source_method']} | {pick} | {mean_branch:.2f} | {mean_source:.2f} | "
                      + " | ".join(difference_cells(d)) + " |")
     return "\n".join(lines)

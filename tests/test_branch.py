@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from experiments.branch import undo_last_acquisition
+from experiments.branch import short_flags, undo_last_acquisition
 from tests.conftest import ROOT
 from tests.test_selection_fit import ENV, script, tiny_grid
 from utils.errors import UserError
@@ -23,6 +23,11 @@ def test_undo_removes_the_last_picks_and_their_record():
     undone = undo_last_acquisition(checkpoint())
     assert undone["stage"] == 1 and undone["stages"] == checkpoint()["stages"][:1]
     assert undone["train_views"] == [0, 3, 5, 6] and undone["view_stack"] == [] and undone["iteration"] == 50
+
+
+def test_long_id_lists_are_counted_in_the_table():
+    assert short_flags("--exclude_views 4 12 14 16 18 --eps 0.3") == "--exclude_views (5 ids) --eps 0.3"
+    assert short_flags("--exclude_views 4 12") == "--exclude_views 4 12" and short_flags("") == ""
 
 
 @pytest.mark.parametrize("change, expected", [

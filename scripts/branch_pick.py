@@ -28,7 +28,8 @@ def main() -> None:
                    help="selectors for the last pick, NAME[+OPTION=VALUE...] (e.g. pop_gs+gain_weight=opacity)")
     p.add_argument("--out", type=Path, help="folder of the branches (OUT/SCENE/METHOD/SPEC/SEED)")
     p.add_argument("--train_args", default="", metavar="FLAGS",
-                   help='extra train.py flags for every branch, quoted (e.g. "--exclude_views 3 17"); use their own --out')
+                   help='extra train.py flags for every branch, quoted (e.g. "--exclude_views 3 17"); '
+                        "give them their own --out")
     p.add_argument("--threads", type=int, default=1, help="torch threads (default 1: two of these side by side)")
     p.add_argument("--table-only", action="store_true", help="train nothing; tabulate the finished branches")
     p.add_argument("--json", type=Path, help="also write the table's rows (every seed's PSNRs) to this file")

@@ -58,7 +58,8 @@ def test_a_branch_with_the_runs_own_selector_is_the_run(tiny_scene, tmp_path):
     row = f"| {tiny_scene.name} | coverage | coverage | "
     assert row in r.stdout and "| 1 | +0.00 | – | 0 / 0 | no |" in r.stdout, r.stdout
     again = script("branch_pick.py", "--table", str(rows))
-    assert again.returncode == 0 and again.stdout.strip() in r.stdout and row in again.stdout, again.stdout + again.stderr
+    assert again.returncode == 0 and again.stdout.strip() in r.stdout and row in again.stdout, \
+        again.stdout + again.stderr
     rerun = script("branch_pick.py", str(run), "--specs", "coverage", "--out", str(branches))  # finished: skipped
     assert rerun.returncode == 0 and "already finished" in rerun.stdout, rerun.stdout + rerun.stderr
     mixed = script("branch_pick.py", str(run), "--specs", "coverage", "--out", str(branches),

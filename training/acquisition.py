@@ -26,10 +26,11 @@ from utils.errors import UserError
 
 def allowed_views(cfg: TrainConfig, pool: int) -> list[int]:
     """The training view ids a run may seed or pick: all but --exclude_views (checked: distinct ids in the pool)."""
-    excluded = cfg.active.exclude_views
-    if any(not 0 <= v < pool for v in excluded) or len(set(excluded)) != len(excluded):
-        raise UserError(f"--exclude_views must be distinct view ids in [0, {pool}); got {list(excluded)}")
-    return [v for v in range(pool) if v not in set(excluded)]
+    excluded = set(cfg.active.exclude_views)
+    if any(not 0 <= v < pool for v in excluded) or len(excluded) != len(cfg.active.exclude_views):
+        raise UserError(f"--exclude_views must be distinct view ids in [0, {pool}); "
+                        f"got {list(cfg.active.exclude_views)}")
+    return [v for v in range(pool) if v not in excluded]
 
 
 def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
@@ -42,7 +43,8 @@ def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
         if bad or len(set(a.init_views)) != len(a.init_views):
             raise UserError(f"--init_views must be distinct view ids in [0, {pool}); got {list(a.init_views)}")
         if excluded := sorted(set(a.init_views) & set(a.exclude_views)):
-            raise UserError(f"--init_views {excluded} are also in --exclude_views; seed from views that can be captured")
+            raise UserError(f"--init_views {excluded} are also in --exclude_views; "
+                            "seed from views that can be captured")
         return list(a.init_views)
     centers = torch.stack([scene.train_cameras[v].camera_center.cpu() for v in allowed])
     return [allowed[i] for i in farthest_point_views(centers, a.num_init_views)]
@@ -50,10 +52,11 @@ def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
 
 def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: Selector, k: int,
                   background: torch.Tensor, settings: RasterSettings) -> dict[str, Any]:
-    """The training run's acquisition step: `active.acquisition.run_selection` over the training cameras not trained
-    on yet and not excluded (seeded by --seed and the stage) by the selector `selector.for_step` chooses for this step (itself, but
-    for `auto`), its Fisher pass checked against the available memory first (`fit_selection_memory`); returns the
-    stage record for selection.json (with the rule line of a selector that has one)."""
+    """The training run's acquisition step: `active.acquisition.run_selection` over the training cameras neither
+    trained on yet nor excluded (seeded by --seed and the stage) by the selector `selector.for_step` chooses for this
+    step (itself, but for `auto`), its Fisher pass checked against the available memory first
+    (`fit_selection_memory`); returns the stage record for selection.json (with the rule line of a selector that has
+    one)."""
     candidates = [v for v in allowed_views(cfg, len(scene.train_cameras)) if v not in state.train_views]
     choice = selector.for_step(len(state.train_views), model_iterations(state, cfg))
     used = choice.selector

@@ -19,8 +19,10 @@ from active.registry import build_selector
 from experiments.replay import first_acquisition, logged_argv
 from scene.cameras import Camera
 from scene.gaussian_model import GaussianModel
-from utils.errors import UserError
+from scene.trained import find_iteration
+from training.acquisition import candidate_views
 from utils.io import read_json
+from utils.model_dir import point_cloud_ply
 
 SELECTORS = ("cover_pool", "coverage")
 
@@ -37,11 +39,7 @@ def covered_share(gaussians: GaussianModel, cameras: list[Camera], captured: lis
 
 def final_model(run_dir: Path) -> GaussianModel:
     """The run's last saved model (point_cloud/iteration_N/point_cloud.ply, the largest N)."""
-    saved = sorted((run_dir / "point_cloud").glob("iteration_*/point_cloud.ply"),
-                   key=lambda p: int(p.parent.name.split("_")[1]))
-    if not saved:
-        raise UserError(f"{run_dir} has no point_cloud/iteration_*/point_cloud.ply; pass finished runs")
-    return GaussianModel.load_ply(saved[-1])
+    return GaussianModel.load_ply(point_cloud_ply(run_dir, find_iteration(run_dir)))
 
 
 def pick_objective(run_dir: Path) -> dict:
@@ -51,10 +49,10 @@ def pick_objective(run_dir: Path) -> dict:
                       fix="pass a run that has acquired, trained with a selector")["stages"][0]
     final = final_model(run_dir)
     row = {"run": str(run_dir), "scene": run_dir.parents[1].name, "captured": stage["train_views"]}
-    with first_acquisition(run_dir) as (run, _):
+    with first_acquisition(run_dir) as (run, cfg):
         captured = run.state.train_views
         cameras = run.scene.train_cameras
-        candidates = [v for v in range(len(cameras)) if v not in captured]
+        candidates = candidate_views(run.state, run.scene, cfg)
         for name in SELECTORS:
             picks = run_selection(build_selector(name), run.state.gaussians, cameras, captured, candidates,
                                   len(stage["selected"]), run.background, run.settings).selection.ids

@@ -50,6 +50,11 @@ def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
     return [allowed[i] for i in farthest_point_views(centers, a.num_init_views)]
 
 
+def candidate_views(state: TrainState, scene: Scene, cfg: TrainConfig) -> list[int]:
+    """The views the next acquisition may pick: the allowed training views not trained on yet."""
+    return [v for v in allowed_views(cfg, len(scene.train_cameras)) if v not in state.train_views]
+
+
 def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: Selector, k: int,
                   background: torch.Tensor, settings: RasterSettings) -> dict[str, Any]:
     """The training run's acquisition step: `active.acquisition.run_selection` over the training cameras neither
@@ -57,7 +62,7 @@ def acquire_views(state: TrainState, scene: Scene, cfg: TrainConfig, selector: S
     step (itself, but for `auto`), its Fisher pass checked against the available memory first
     (`fit_selection_memory`); returns the stage record for selection.json (with the rule line of a selector that has
     one)."""
-    candidates = [v for v in allowed_views(cfg, len(scene.train_cameras)) if v not in state.train_views]
+    candidates = candidate_views(state, scene, cfg)
     choice = selector.for_step(len(state.train_views), model_iterations(state, cfg))
     used = choice.selector
     fisher = fit_selection_memory(cfg, used, state.gaussians, scene.train_cameras, len(candidates))

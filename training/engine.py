@@ -26,7 +26,8 @@ from gaussian_renderer import RasterSettings
 from scene.resolution_policy import training_resolution
 from scene.scene import Scene
 from scene.trained import background_color, raster_settings
-from training.acquisition import acquire_views, allowed_views, check_memory_before_training, seed_views
+from training.acquisition import (acquire_views, allowed_views, candidate_views, check_memory_before_training,
+                                  seed_views)
 from training.config import TrainConfig, default_model_path, make_selector
 from training.optim import PositionLRSchedule
 from training.state import TrainState, capture_state, fresh_state, restore_state
@@ -126,7 +127,7 @@ def _open_run(cfg: TrainConfig, model_path: str) -> Run:
     if selector is not None and state.stage < len(plan.adds):  # the next acquisition's Fisher pass at the largest
         # model the run can reach: refused before any work (and before a fresh run writes anything)
         check_memory_before_training(cfg, selector, state.gaussians, scene.train_cameras,
-                                     len(scene.train_cameras) - len(state.train_views))
+                                     len(candidate_views(state, scene, cfg)))
     if checkpoint is None:
         run_dir.start({**cfg.to_dict(), "total_iterations": plan.total_iterations, "dataset": scene.dataset_record()})
         scene.write_cameras_json()
@@ -178,7 +179,7 @@ def acquire(run: Run, progress: tqdm) -> None:
     the stage checkpoint."""
     state, cfg = run.state, run.cfg
     k = run.plan.adds[state.stage]
-    candidates = len(set(allowed_views(cfg, len(run.scene.train_cameras))) - set(state.train_views))
+    candidates = len(candidate_views(state, run.scene, cfg))
     progress.write(f"[stage {state.stage}] selecting {k} of {candidates} candidates with {cfg.active.method}")
     record = acquire_views(state, run.scene, cfg, run.selector, k, run.background, run.settings)
     for line in (record.get("rule"), record.get("note")):

@@ -1,14 +1,17 @@
-"""Branch finished grid runs at their last acquisition: the same model, another selector's picks.
+"""Branch finished grid runs at one acquisition: the same model, another selector's picks there.
 
-A run saves its checkpoint right after each acquisition; the last one holds the model trained on the views before
-that acquisition (an acquisition adds views and writes the record; it leaves the model and optimiser alone unless
-`--stage_reset`). With that acquisition undone, train.py resumes the checkpoint with another selector: every branch
-of a run picks from the identical model and trains on from the identical random state, so the difference of the
-final test PSNRs is the pick's doing alone, at the cost of the last stage's training. A branch with the run's own
-(deterministic) selector reproduces the run (tested). CLI: scripts/branch_pick.py.
+A run saves its checkpoint right after each acquisition; the one of acquisition S holds the model trained on the
+views before S (an acquisition adds views and writes the record; it leaves the model and optimiser alone unless
+`--stage_reset`). With that acquisition undone, train.py resumes the checkpoint with the other selector making
+acquisition S's picks (`--stage_method S:NAME`) and the run's own selector the later ones: every branch of a run
+picks from the identical model and trains on from the identical random state, so the difference of the final test
+PSNRs is that one pick's doing (with what it changes in the later picks), at the cost of the training after S. A
+branch with the run's own (deterministic) selector reproduces the run (tested). Runs keep their newest two
+checkpoints, which covers the last acquisition (the default) and usually the one before; train.py's
+`--keep_checkpoints 0` keeps every one. CLI: scripts/branch_pick.py.
 
-Layout: OUT/SCENE/METHOD/SPEC/SEED (METHOD: the runs' own), a train.py model directory each, its `cfg_args` naming
-the run it branched from.
+Layout: OUT/SCENE/METHOD/SPEC/SEED for the last acquisition, OUT/SCENE/METHOD/SPEC@S/SEED for acquisition S
+(METHOD: the runs' own), a train.py model directory each, its `cfg_args` naming the run it branched from.
 """
 from __future__ import annotations
 
@@ -48,32 +51,53 @@ def check_branchable(run_dir: Path) -> None:
                         "METHOD/SEED)")
 
 
-def last_acquisition(run_dir: Path) -> dict[str, Any]:
-    """The newest checkpoint of a finished run, which is its last acquisition's."""
+def acquisition_checkpoint(run_dir: Path, stage: int | None = None) -> dict[str, Any]:
+    """The checkpoint a finished run wrote at acquisition `stage` (0 = the first; None: its last one)."""
     check_branchable(run_dir)
-    return load_checkpoint(RunDirectory(run_dir).checkpoints()[-1][1])
+    if stage is None:
+        return load_checkpoint(RunDirectory(run_dir).checkpoints()[-1][1])
+    stages = read_json(run_dir / SELECTION, what="selection record", fix="branch a finished grid run")["stages"]
+    if not 0 <= stage < len(stages):
+        raise UserError(f"--stage {stage}: {run_dir} made acquisitions 0 to {len(stages) - 1}")
+    path = checkpoint_file(run_dir, stages[stage]["iteration"])
+    if not path.is_file():
+        raise UserError(f"{run_dir} kept no checkpoint of acquisition {stage} (iteration {stages[stage]['iteration']}): "
+                        "runs keep their newest two; train it again with train.py --keep_checkpoints 0 (grid.py: "
+                        "--train_args) to branch there")
+    return load_checkpoint(path)
 
 
-def branch_dir(out: Path, run_dir: Path, spec: str) -> Path:
-    """OUT/SCENE/METHOD/SPEC/SEED for a grid run ROOT/SETUP/SCENE/METHOD/SEED."""
-    return out / run_dir.parents[1].name / run_dir.parent.name / spec / run_dir.name
+def branch_dir(out: Path, run_dir: Path, spec: str, stage: int | None = None) -> Path:
+    """OUT/SCENE/METHOD/SPEC[@STAGE]/SEED for a grid run ROOT/SETUP/SCENE/METHOD/SEED."""
+    name = spec if stage is None else f"{spec}@{stage}"
+    return out / run_dir.parents[1].name / run_dir.parent.name / name / run_dir.name
 
 
-def run_branch(run_dir: Path, spec: str, out: Path, train_args: tuple[str, ...] = ()) -> Path:
-    """Train the branch of `run_dir` whose last pick is `spec`'s, with `train_args` (extra train.py flags, e.g.
-    --exclude_views) after the run's own (resumed if it was interrupted, skipped if done); returns its model
-    directory. A branch folder made with other `train_args` is refused (one --out per set of extra flags)."""
+def stage_flags(spec: str, stage: int) -> list[str]:
+    """train.py's flags for `spec` making acquisition `stage`'s picks: --stage_method STAGE:NAME and the spec's options
+    (which the run's own selector takes too, where it has them)."""
+    flags = method_flags(spec)
+    return ["--stage_method", f"{stage}:{flags[1]}", *flags[2:]]
+
+
+def run_branch(run_dir: Path, spec: str, out: Path, train_args: tuple[str, ...] = (), stage: int | None = None) -> Path:
+    """Train the branch of `run_dir` whose picks at acquisition `stage` (None: the last) are `spec`'s, with
+    `train_args` (extra train.py flags, e.g. --exclude_views) after the run's own (resumed if it was interrupted,
+    skipped if done); returns its model directory. A branch folder made with other `train_args` is refused (one --out
+    per set of extra flags)."""
     check_branchable(run_dir)
-    target = branch_dir(out, run_dir, spec)
+    target = branch_dir(out, run_dir, spec, stage)
     earlier = read_json(target / CFG_ARGS, missing="none", damaged="none")
     if earlier is not None and earlier.get("branch_train_args", []) != list(train_args):
         raise UserError(f"{target} was branched with train.py flags {earlier.get('branch_train_args', [])}, not "
                         f"{list(train_args)}; give these flags their own --out")
-    start = None if RunDirectory(target).checkpoints() else undo_last_acquisition(last_acquisition(run_dir))
+    ckpt = acquisition_checkpoint(run_dir, stage)
+    undone = ckpt["stage"] - 1  # the acquisition the branch makes again
     argv = logged_argv(run_dir)
     argv[argv.index("-m") + 1] = str(target)
-    cfg = parse_config([*argv, "--quiet", *train_args, *method_flags(spec)])
-    if start is not None:
+    cfg = parse_config([*argv, "--quiet", *train_args, *stage_flags(spec, undone)])
+    if not RunDirectory(target).checkpoints():
+        start = undo_last_acquisition(ckpt)
         target.mkdir(parents=True, exist_ok=True)
         write_json(target / CFG_ARGS, {**cfg.to_dict(), "branch_of": str(run_dir), "branch_iteration":
                                        start["iteration"], "branch_train_args": list(train_args)})
@@ -91,9 +115,11 @@ def final_psnr(model_dir: Path) -> float:
     return record["final"]["test_psnr"]
 
 
-def branch_rows(runs: list[Path], specs: list[str], out: Path, train_args: tuple[str, ...] = ()) -> list[dict]:
-    """Per scene, method the runs came from, and spec: the finished branches' final PSNRs by seed and the runs' own
-    (JSON-ready but for the integer seed keys; `rows_from_json` reads them back)."""
+def branch_rows(runs: list[Path], specs: list[str], out: Path, train_args: tuple[str, ...] = (),
+                stage: int | None = None) -> list[dict]:
+    """Per scene, method the runs came from, and spec: the finished branches' (at acquisition `stage`, None: the
+    last) final PSNRs by seed and the runs' own (JSON-ready but for the integer seed keys; `rows_from_json` reads
+    them back)."""
     groups: dict[tuple[str, str], list[Path]] = {}
     for run in runs:
         groups.setdefault((run.parents[1].name, run.parent.name), []).append(run)
@@ -101,11 +127,11 @@ def branch_rows(runs: list[Path], specs: list[str], out: Path, train_args: tuple
     for (scene, method), members in sorted(groups.items()):
         sources = {int(r.name[4:]): final_psnr(r) for r in members}
         for spec in specs:
-            done = {int(r.name[4:]): final_psnr(branch_dir(out, r, spec)) for r in members
-                    if RunDirectory(branch_dir(out, r, spec)).is_complete()}
+            done = {int(r.name[4:]): final_psnr(branch_dir(out, r, spec, stage)) for r in members
+                    if RunDirectory(branch_dir(out, r, spec, stage)).is_complete()}
             if done:
                 rows.append({"scene": scene, "source_method": method, "spec": spec, "train_args": " ".join(train_args),
-                             "psnr": done, "source": sources})
+                             "stage": stage, "psnr": done, "source": sources})
     return rows
 
 
@@ -130,15 +156,17 @@ def short_flags(flags: str, longest: int = 4) -> str:
 
 
 def branch_table(rows: list[dict]) -> str:
-    """Markdown of `branch_rows`: each branch's mean final PSNR and its paired difference to the run it branched."""
-    lines = ["| scene | runs of | last pick by | final PSNR | the runs' (same seeds) | seeds | pick − run (mean) | "
+    """Markdown of `branch_rows`: each branch's mean final PSNR and its paired difference to the run it branched
+    (its pick at the runs' last acquisition unless the cell names one)."""
+    lines = ["| scene | runs of | pick by | final PSNR | the runs' (same seeds) | seeds | pick − run (mean) | "
              "95% interval | seeds above / below | resolved |", "|---|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
         d: PairedDifference = paired_difference(row["psnr"], row["source"])
         seeds = sorted(row["psnr"])
         mean_branch = sum(row["psnr"][s] for s in seeds) / len(seeds)
         mean_source = sum(row["source"][s] for s in seeds) / len(seeds)
-        pick = f"{row['spec']} {short_flags(row['train_args'])}" if row.get("train_args") else row["spec"]
+        pick = " ".join(filter(None, (row["spec"], short_flags(row.get("train_args", "")),
+                                      row.get("stage") is not None and f"at acquisition {row['stage']}")))
         lines.append(f"| {row['scene']} | {row['source_method']} | {pick} | {mean_branch:.2f} | {mean_source:.2f} | "
                      + " | ".join(difference_cells(d)) + " |")
     return "\n".join(lines)

@@ -1,9 +1,9 @@
-"""Branch finished grid runs at their last acquisition and let other selectors make that pick
-(experiments/branch.py): each branch picks from the run's own model and trains on from its random state, so the
-final PSNR differences are the last pick's alone.
+"""Branch finished grid runs at one acquisition (default: their last) and let other selectors make that pick
+(experiments/branch.py): each branch picks from the run's own model and trains on from its random state, the run's
+own selector making any later picks, so the final PSNR differences are that pick's doing.
 
     python scripts/branch_pick.py output/paper_stages_auto/setup1/mic/auto/seed* \\
-        --specs coverage cover_pool --out output/branch_mic [--table-only] [--json rows.json]
+        --specs coverage cover_pool --out output/branch_mic [--stage 1] [--table-only] [--json rows.json]
     python scripts/branch_pick.py --table rows.json
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
-from experiments.branch import branch_rows, branch_table, check_branchable, rows_from_json, run_branch
+from experiments.branch import acquisition_checkpoint, branch_rows, branch_table, rows_from_json, run_branch
 from experiments.replay import saved_rows
 from utils.errors import UserError, run_cli
 from utils.io import write_json
@@ -30,6 +30,8 @@ def main() -> None:
     p.add_argument("--train_args", default="", metavar="FLAGS",
                    help='extra train.py flags for every branch, quoted (e.g. "--exclude_views 3 17"); '
                         "give them their own --out")
+    p.add_argument("--stage", type=int, help="the acquisition to branch at, 0 = the first, as in selection.json "
+                   "(default: the last); the run must have kept its checkpoint (train.py --keep_checkpoints 0 keeps all)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (default 1: two of these side by side)")
     p.add_argument("--table-only", action="store_true", help="train nothing; tabulate the finished branches")
     p.add_argument("--json", type=Path, help="also write the table's rows (every seed's PSNRs) to this file")
@@ -43,12 +45,12 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     train_args = tuple(shlex.split(args.train_args))
     for run in args.runs:
-        check_branchable(run)
+        acquisition_checkpoint(run, args.stage)  # every run branchable there, before any branch trains
     if not args.table_only:
         jobs = [(run, spec) for run in args.runs for spec in args.specs]
         for run, spec in tqdm(jobs, desc="branches", unit="run"):
-            run_branch(run, spec, args.out, train_args)
-    rows = branch_rows(args.runs, args.specs, args.out, train_args)
+            run_branch(run, spec, args.out, train_args, args.stage)
+    rows = branch_rows(args.runs, args.specs, args.out, train_args, args.stage)
     if args.json is not None:
         write_json(args.json, rows)
     print(branch_table(rows))

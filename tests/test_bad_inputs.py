@@ -105,6 +105,31 @@ def setup_excluded_seed_view(tiny_scene, tmp):
             "--exclude_views", "5"], "also in --exclude_views"
 
 
+def setup_stage_method_malformed(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--stage_method", "coverage"], \
+        "--stage_method takes STAGE:NAME"
+
+
+def setup_stage_method_unknown_selector(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--stage_method", "0:greedy"], \
+        "unknown selector 'greedy' in --stage_method"
+
+
+def setup_stage_method_beyond_the_plan(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--stage_method", "2:coverage"], \
+        "this run makes 2 (0 to 1"
+
+
+def setup_stage_method_without_method(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), "--stage_method", "0:coverage"], \
+        "pass --method too"
+
+
+def setup_negative_keep_checkpoints(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), *ACTIVE, "--keep_checkpoints", "-1"], \
+        "--keep_checkpoints must be >= 0"
+
+
 def setup_unknown_method(tiny_scene, tmp):
     return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), "--method", "greedy"], "choose one of"
 

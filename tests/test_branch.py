@@ -65,6 +65,31 @@ def test_a_branch_with_the_runs_own_selector_is_the_run(tiny_scene, tmp_path):
     mixed = script("branch_pick.py", str(run), "--specs", "coverage", "--out", str(branches),
                    "--train_args=--exclude_views 1")  # other train.py flags never land in a folder made without them
     assert mixed.returncode != 0 and "give these flags their own --out" in mixed.stderr, mixed.stderr
+    early = script("branch_pick.py", str(run), "--specs", "random", "--out", str(branches), "--stage", "0")
+    assert early.returncode != 0 and "kept no checkpoint of acquisition 0" in early.stderr, early.stderr
+
+
+@pytest.mark.slow
+def test_a_branch_at_the_first_acquisition(tiny_scene, tmp_path):
+    """A run that kept every checkpoint, branched at acquisition 0: the branch with the run's own selector is the run;
+    with another, only acquisition 0 is that selector's, the later ones the run's own (coverage's, no oracle)."""
+    run = tiny_grid(tiny_scene, tmp_path / "out", "coverage", train_flags=("--keep_checkpoints", "0")) / "coverage" / "seed0"
+    branches = tmp_path / "branches"
+    r = script("branch_pick.py", str(run), "--specs", "coverage", "lite_gs", "--out", str(branches), "--stage", "0")
+    assert r.returncode == 0, r.stdout + r.stderr
+    original = json.loads((run / "selection.json").read_text())
+    folder = branches / tiny_scene.name / "coverage"
+    same = json.loads((folder / "coverage@0" / "seed0" / "selection.json").read_text())
+    other = json.loads((folder / "lite_gs@0" / "seed0" / "selection.json").read_text())
+    assert same["final"]["test_psnr"] == original["final"]["test_psnr"]
+    assert [s["selected"] for s in same["stages"]] == [s["selected"] for s in original["stages"]]
+    assert other["stages"][0]["test_psnr"] == original["stages"][0]["test_psnr"]  # picked from the same model
+    assert other["stages"][0]["selected"] != original["stages"][0]["selected"]
+    assert [s.get("stage_method") for s in other["stages"]] == ["lite_gs", None, None]
+    assert [s["oracle_calls"]["evaluated"] > 0 for s in other["stages"]] == [True, False, False]
+    assert "| coverage | lite_gs at acquisition 0 |" in r.stdout, r.stdout
+    beyond = script("branch_pick.py", str(run), "--specs", "random", "--out", str(branches), "--stage", "3")
+    assert beyond.returncode != 0 and "made acquisitions 0 to 2" in beyond.stderr, beyond.stderr
 
 
 @pytest.mark.parametrize("args, expected", [

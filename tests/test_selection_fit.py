@@ -19,12 +19,13 @@ def script(name: str, *args: str, timeout: int = 600) -> subprocess.CompletedPro
                           env=ENV, timeout=timeout)
 
 
-def tiny_grid(scene: Path, out: Path, *methods: str) -> Path:
-    """A one-seed Setup 1 grid of `methods` on the tiny scene (seconds); returns its scene folder OUT/setup1/SCENE."""
+def tiny_grid(scene: Path, out: Path, *methods: str, train_flags: tuple[str, ...] = ()) -> Path:
+    """A one-seed Setup 1 grid of `methods` on the tiny scene (seconds; three acquisitions, with `train_flags`
+    added to train.py's); returns its scene folder OUT/setup1/SCENE."""
     r = script("grid.py", "--setup", "setup1", "--data", str(scene.parent), "--scenes", scene.name,
                "--methods", *methods, "--seeds", "1", "--out", str(out), "--launcher", "local", "--threads", "1",
                "--iter_scale", "0.005", "--num_points", "150", "--resolution", "-1", "--device", "cpu", "--",
-               "--sh_degree", "1")
+               "--sh_degree", "1", *train_flags)
     assert r.returncode == 0, r.stdout + r.stderr
     return out / "setup1" / scene.name
 

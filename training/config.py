@@ -74,9 +74,15 @@ def validate_config(cfg: TrainConfig) -> None:
     if cfg.model.device == "cuda" and not torch.cuda.is_available():
         raise UserError("--device cuda was asked for but torch sees no CUDA device; use --device cpu")
     raster_settings(cfg.pipeline)  # a bad or unavailable --raster_backend fails before anything is written
+    if cfg.run.keep_checkpoints < 0:
+        raise UserError(f"--keep_checkpoints must be >= 0 (0 keeps every checkpoint), got {cfg.run.keep_checkpoints}")
     a = cfg.active
+    if a.stage_method and not a.method:
+        raise UserError("--stage_method replaces --method at some acquisitions: pass --method too (the selector of "
+                        "the others)")
     if a.method:
         make_selector(cfg)
+        stage_selectors(cfg)
         if a.sigma <= 0:
             raise UserError(f"--sigma must be positive, got {a.sigma}")
 
@@ -86,6 +92,23 @@ def make_selector(cfg: TrainConfig) -> Selector:
     if cfg.active.method not in list_selectors():
         raise UserError(f"unknown --method {cfg.active.method!r}; choose one of: {', '.join(list_selectors())}")
     return build_selector_from(cfg.active.method, config_to_dict(cfg.selector))
+
+
+def stage_selectors(cfg: TrainConfig) -> dict[int, Selector]:
+    """--stage_method's selectors by acquisition stage (0 = the first), built like --method's from the same flags."""
+    chosen: dict[int, Selector] = {}
+    for entry in cfg.active.stage_method:
+        stage, _, name = entry.partition(":")
+        if not stage.isdigit() or not name:
+            raise UserError(f"--stage_method takes STAGE:NAME with STAGE an acquisition number from 0 (e.g. "
+                            f"1:coverage), got {entry!r}")
+        if int(stage) in chosen:
+            raise UserError(f"--stage_method names acquisition {int(stage)} twice; give each stage one selector")
+        if name not in list_selectors():
+            raise UserError(f"unknown selector {name!r} in --stage_method {entry}; choose one of: "
+                            f"{', '.join(list_selectors())}")
+        chosen[int(stage)] = build_selector_from(name, config_to_dict(cfg.selector))
+    return chosen
 
 
 def default_model_path(cfg: TrainConfig) -> str:

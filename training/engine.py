@@ -28,13 +28,14 @@ from scene.scene import Scene
 from scene.trained import background_color, raster_settings
 from training.acquisition import (acquire_views, allowed_views, candidate_views, check_memory_before_training,
                                   seed_views)
-from training.config import TrainConfig, default_model_path, make_selector
+from training.config import TrainConfig, default_model_path, make_selector, stage_selectors
 from training.optim import PositionLRSchedule
 from training.state import TrainState, capture_state, fresh_state, restore_state
 from training.step import mean_psnr, next_view, training_step
 from training.time_estimate import RunTimeEstimator
 from utils import dir_lock
 from utils.checkpoint import RunDirectory
+from utils.errors import UserError
 from utils.io import read_json, write_json
 from utils.model_dir import INPUT_PLY, SELECTION
 from utils.provenance import session_record
@@ -77,6 +78,11 @@ class Run:
     progress_written: float = field(default_factory=time.monotonic)  # when run_status.json last got the progress
     sessions: list[dict[str, Any]] = field(default_factory=list)  # provenance of each start/resume (selection.json)
     lock: contextlib.ExitStack | None = None  # the model directory's writer lock (utils.dir_lock), until `close_run`
+    stage_selectors: dict[int, Selector] = field(default_factory=dict)  # --stage_method: acquisition -> selector
+
+    def selector_at(self, stage: int) -> Selector | None:
+        """The selector of acquisition `stage`: --stage_method's for that stage, else --method's."""
+        return self.stage_selectors.get(stage, self.selector)
 
 
 def open_run(cfg: TrainConfig, model_path: str) -> Run:
@@ -124,10 +130,14 @@ def _open_run(cfg: TrainConfig, model_path: str) -> Run:
         train_views = seed_views(scene, cfg) if cfg.active.method else list(range(len(scene.train_cameras)))
         state = fresh_state(scene, cfg, train_views, plan.total_iterations)
     selector = make_selector(cfg) if cfg.active.method else None
+    by_stage = stage_selectors(cfg) if selector is not None else {}
+    if by_stage and max(by_stage) >= len(plan.adds):
+        raise UserError(f"--stage_method names acquisition {max(by_stage)}, but this run makes {len(plan.adds)} "
+                        f"(0 to {len(plan.adds) - 1}; see --max_views and --views_per_step)")
     if selector is not None and state.stage < len(plan.adds):  # the next acquisition's Fisher pass at the largest
         # model the run can reach: refused before any work (and before a fresh run writes anything)
-        check_memory_before_training(cfg, selector, state.gaussians, scene.train_cameras,
-                                     len(candidate_views(state, scene, cfg)))
+        check_memory_before_training(cfg, by_stage.get(state.stage, selector), state.gaussians,
+                                     scene.train_cameras, len(candidate_views(state, scene, cfg)))
     if checkpoint is None:
         run_dir.start({**cfg.to_dict(), "total_iterations": plan.total_iterations, "dataset": scene.dataset_record()})
         scene.write_cameras_json()
@@ -138,7 +148,7 @@ def _open_run(cfg: TrainConfig, model_path: str) -> Run:
     sessions = previous_sessions(run_dir.path / SELECTION) if checkpoint is not None else []
     sessions.append(session_record(iteration=state.iteration, device=cfg.model.device))
     return Run(cfg, run_dir, scene, plan, selector, background_color(cfg.model), raster_settings(cfg.pipeline), state,
-               rng, PositionLRSchedule.from_config(cfg.optim, scene.extent), sessions=sessions)
+               rng, PositionLRSchedule.from_config(cfg.optim, scene.extent), sessions=sessions, stage_selectors=by_stage)
 
 
 def previous_sessions(selection_path: Path) -> list[dict[str, Any]]:
@@ -171,7 +181,7 @@ def train_stage(run: Run, progress: tqdm) -> None:
         if state.iteration in save_its:
             run.scene.save_gaussians(state.gaussians, state.iteration)
         if state.iteration in run_cfg.checkpoint_iterations:
-            run.run_dir.save_checkpoint(capture_state(state, run.rng, run.cfg))
+            run.run_dir.save_checkpoint(capture_state(state, run.rng, run.cfg), keep=run_cfg.keep_checkpoints)
 
 
 def acquire(run: Run, progress: tqdm) -> None:
@@ -180,8 +190,13 @@ def acquire(run: Run, progress: tqdm) -> None:
     state, cfg = run.state, run.cfg
     k = run.plan.adds[state.stage]
     candidates = len(candidate_views(state, run.scene, cfg))
-    progress.write(f"[stage {state.stage}] selecting {k} of {candidates} candidates with {cfg.active.method}")
-    record = acquire_views(state, run.scene, cfg, run.selector, k, run.background, run.settings)
+    selector = run.selector_at(state.stage)
+    progress.write(f"[stage {state.stage}] selecting {k} of {candidates} candidates with {selector.name}"
+                   + (f" (--stage_method; the run's --method is {cfg.active.method})"
+                      if state.stage in run.stage_selectors else ""))
+    record = acquire_views(state, run.scene, cfg, selector, k, run.background, run.settings)
+    if state.stage in run.stage_selectors:
+        record = {**record, "stage_method": selector.name}
     for line in (record.get("rule"), record.get("note")):
         if line is not None:
             progress.write(f"[stage {state.stage}] {line}")
@@ -193,7 +208,7 @@ def acquire(run: Run, progress: tqdm) -> None:
         reset = fresh_state(run.scene, cfg, state.train_views, run.plan.total_iterations)
         state.gaussians, state.optimizer, state.strategy = reset.gaussians, reset.optimizer, reset.strategy
     write_selection(run)
-    run.run_dir.save_checkpoint(capture_state(state, run.rng, cfg))
+    run.run_dir.save_checkpoint(capture_state(state, run.rng, cfg), keep=cfg.run.keep_checkpoints)
 
 
 def finish(run: Run) -> None:

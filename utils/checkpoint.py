@@ -16,7 +16,7 @@ from utils.model_dir import CFG_ARGS, CHECKPOINTS_DIR, LOCK_FILE, RUN_STATUS, ch
 
 CHECKPOINT_FORMAT_VERSION = 1
 _CKPT_RE = re.compile(r"^chkpnt_(\d+)\.pt$")
-KEEP_CHECKPOINTS = 2  # the newest two: a fallback if the newest turns out unreadable
+KEEP_CHECKPOINTS = 2  # by default the newest two: a fallback if the newest turns out unreadable (--keep_checkpoints)
 
 
 class RunDirectory:
@@ -81,11 +81,11 @@ class RunDirectory:
         found = [(int(m.group(1)), p) for p in folder.iterdir() if (m := _CKPT_RE.match(p.name))]
         return sorted(found)
 
-    def save_checkpoint(self, state: dict[str, Any]) -> Path:
-        """Write `checkpoints/chkpnt_<iteration>.pt` atomically and drop all but the newest few."""
+    def save_checkpoint(self, state: dict[str, Any], keep: int = KEEP_CHECKPOINTS) -> Path:
+        """Write `checkpoints/chkpnt_<iteration>.pt` atomically and drop all but the newest `keep` (0: keep all)."""
         path = checkpoint_file(self.path, state["iteration"])
         save_torch(path, {"format_version": CHECKPOINT_FORMAT_VERSION, **state})
-        for _, old in self.checkpoints()[:-KEEP_CHECKPOINTS]:
+        for _, old in (self.checkpoints()[:-keep] if keep > 0 else []):
             old.unlink(missing_ok=True)
         return path
 

@@ -63,7 +63,7 @@ def acquisition_checkpoint(run_dir: Path, stage: int | None = None) -> dict[str,
     if not path.is_file():
         raise UserError(f"{run_dir} kept no checkpoint of acquisition {stage} (iteration {stages[stage]['iteration']}): "
                         "runs keep their newest two; train it again with train.py --keep_checkpoints 0 (grid.py: "
-                        "--train_args) to branch there")
+                        "flags after --) to branch there")
     return load_checkpoint(path)
 
 

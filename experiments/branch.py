@@ -21,7 +21,7 @@ from typing import Any
 from experiments.method_spec import method_flags
 from experiments.paired import PairedDifference, difference_cells, paired_difference
 from experiments.replay import check_grid_run, logged_argv
-from training.config import parse_config
+from training.config import TrainConfig, parse_config
 from training.engine import training
 from utils.checkpoint import CHECKPOINT_FORMAT_VERSION, RunDirectory, load_checkpoint
 from utils.errors import UserError
@@ -101,10 +101,15 @@ def run_branch(run_dir: Path, spec: str, out: Path, train_args: tuple[str, ...] 
         target.mkdir(parents=True, exist_ok=True)
         write_json(target / CFG_ARGS, {**cfg.to_dict(), "branch_of": str(run_dir), "branch_iteration":
                                        start["iteration"], "branch_train_args": list(train_args)})
-        save_torch(checkpoint_file(target, start["iteration"]),
-                   {**start, "format_version": CHECKPOINT_FORMAT_VERSION, "config": cfg.to_dict()})
+        write_start(target, start, cfg)
     training(cfg)
     return target
+
+
+def write_start(model_dir: Path, start: dict[str, Any], cfg: TrainConfig) -> None:
+    """Put checkpoint `start` (an undone acquisition's) in `model_dir`, where train.py with `cfg` resumes from it."""
+    save_torch(checkpoint_file(model_dir, start["iteration"]),
+               {**start, "format_version": CHECKPOINT_FORMAT_VERSION, "config": cfg.to_dict()})
 
 
 def final_psnr(model_dir: Path) -> float:

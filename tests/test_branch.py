@@ -104,3 +104,22 @@ def test_bad_input_is_one_error_line(tmp_path, args, expected):
                        text=True, env=ENV, cwd=tmp_path, timeout=120)
     assert r.returncode != 0 and r.stderr.strip().startswith("error:") and expected in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_pick_information_is_the_recorded_gains(tiny_scene, tmp_path):
+    """The information of a lite_gs run's own last picks is the sum of the marginal gains its record holds (the
+    same oracle on the same model); a branch with the run's own selector has margin 0."""
+    run = tiny_grid(tiny_scene, tmp_path / "out", "lite_gs") / "lite_gs" / "seed0"
+    branches, rows_path = tmp_path / "branches", tmp_path / "rows.json"
+    assert script("branch_pick.py", str(run), "--specs", "lite_gs", "coverage", "--out", str(branches)).returncode == 0
+    r = script("pick_information.py", str(run), "--specs", "lite_gs", "coverage", "--out", str(branches),
+               "--json", str(rows_path))
+    assert r.returncode == 0, r.stdout + r.stderr
+    rows = {row["spec"]: row for row in json.loads(rows_path.read_text())}
+    recorded = json.loads((run / "selection.json").read_text())["stages"][-1]
+    assert rows["lite_gs"]["rho_run"] == pytest.approx(sum(recorded["gains"]), rel=1e-6)
+    assert rows["lite_gs"]["rho_branch"] == rows["lite_gs"]["rho_run"]
+    assert rows["coverage"]["branch_picks"] != recorded["selected"]
+    assert rows["coverage"]["rho_branch"] < rows["coverage"]["rho_run"]  # greedy on the log-det beats coverage on it
+    assert "| lite_gs | coverage |" in r.stdout and "| lite_gs | lite_gs | 2 | 1 | +0.000" in r.stdout, r.stdout

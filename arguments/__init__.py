@@ -101,6 +101,7 @@ class ActiveConfig:
     method: str = field(default="", metadata=_flag(None, "view selector; empty = train on all training views"))
     num_init_views: int = field(default=2, metadata=_flag(None, "seed views (farthest-point sampling from view 0)"))
     init_views: tuple[int, ...] = field(default=(), metadata=_flag(None, "explicit seed view ids (overrides --num_init_views)"))
+    seed_start: str = field(default="first", metadata=_flag(None, "farthest-point seeding starts from the first allowed view (the paper's protocols: every --seed gets the same seed views) or from one drawn with --seed (the seed views, and a deterministic selector's picks, vary with --seed)", ("first", "random")))
     exclude_views: tuple[int, ...] = field(default=(), metadata=_flag(None, "view ids never offered to the selector nor seeded (poses that cannot be captured)"))
     stage_method: tuple[str, ...] = field(default=(), metadata=_flag(None, "STAGE:NAME: the selector NAME makes acquisition STAGE's picks instead of --method (STAGE as in selection.json: 0 = the first acquisition; NAME takes the same selector flags)"))
     views_per_step: int = field(default=3, metadata=_flag(None, "K: views added per acquisition step"))

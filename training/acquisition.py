@@ -2,6 +2,7 @@
 check of its Fisher pass."""
 from __future__ import annotations
 
+import random
 from dataclasses import replace
 from typing import Any
 
@@ -34,7 +35,9 @@ def allowed_views(cfg: TrainConfig, pool: int) -> list[int]:
 
 
 def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
-    """Seed views: --init_views, or farthest-point sampling of the allowed views' camera centres from the first."""
+    """Seed views: --init_views, or farthest-point sampling of the allowed views' camera centres from the first
+    (--seed_start first) or from one drawn with --seed (--seed_start random; its own generator, so the run's other
+    random streams are untouched)."""
     pool = len(scene.train_cameras)
     a = cfg.active
     allowed = allowed_views(cfg, pool)
@@ -47,7 +50,8 @@ def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
                             "seed from views that can be captured")
         return list(a.init_views)
     centers = torch.stack([scene.train_cameras[v].camera_center.cpu() for v in allowed])
-    return [allowed[i] for i in farthest_point_views(centers, a.num_init_views)]
+    start = random.Random(cfg.run.seed).randrange(len(allowed)) if a.seed_start == "random" else 0
+    return [allowed[i] for i in farthest_point_views(centers, a.num_init_views, start)]
 
 
 def candidate_views(state: TrainState, scene: Scene, cfg: TrainConfig) -> list[int]:

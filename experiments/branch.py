@@ -61,7 +61,8 @@ def acquisition_checkpoint(run_dir: Path, stage: int | None = None) -> dict[str,
         raise UserError(f"--stage {stage}: {run_dir} made acquisitions 0 to {len(stages) - 1}")
     path = checkpoint_file(run_dir, stages[stage]["iteration"])
     if not path.is_file():
-        raise UserError(f"{run_dir} kept no checkpoint of acquisition {stage} (iteration {stages[stage]['iteration']}): "
+        raise UserError(f"{run_dir} kept no checkpoint of acquisition {stage} (iteration "
+                        f"{stages[stage]['iteration']}): "
                         "runs keep their newest two; train it again with train.py --keep_checkpoints 0 (grid.py: "
                         "flags after --) to branch there")
     return load_checkpoint(path)

@@ -31,7 +31,8 @@ def main() -> None:
                    help='extra train.py flags for every branch, quoted (e.g. "--exclude_views 3 17"); '
                         "give them their own --out")
     p.add_argument("--stage", type=int, help="the acquisition to branch at, 0 = the first, as in selection.json "
-                   "(default: the last); the run must have kept its checkpoint (train.py --keep_checkpoints 0 keeps all)")
+                   "(default: the last); the run must have kept its checkpoint (train.py --keep_checkpoints 0 "
+                   "keeps all)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (default 1: two of these side by side)")
     p.add_argument("--table-only", action="store_true", help="train nothing; tabulate the finished branches")
     p.add_argument("--json", type=Path, help="also write the table's rows (every seed's PSNRs) to this file")

@@ -73,7 +73,8 @@ def test_a_branch_with_the_runs_own_selector_is_the_run(tiny_scene, tmp_path):
 def test_a_branch_at_the_first_acquisition(tiny_scene, tmp_path):
     """A run that kept every checkpoint, branched at acquisition 0: the branch with the run's own selector is the run;
     with another, only acquisition 0 is that selector's, the later ones the run's own (coverage's, no oracle)."""
-    run = tiny_grid(tiny_scene, tmp_path / "out", "coverage", train_flags=("--keep_checkpoints", "0")) / "coverage" / "seed0"
+    grid = tiny_grid(tiny_scene, tmp_path / "out", "coverage", train_flags=("--keep_checkpoints", "0"))
+    run = grid / "coverage" / "seed0"
     branches = tmp_path / "branches"
     r = script("branch_pick.py", str(run), "--specs", "coverage", "lite_gs", "--out", str(branches), "--stage", "0")
     assert r.returncode == 0, r.stdout + r.stderr

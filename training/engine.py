@@ -148,7 +148,8 @@ def _open_run(cfg: TrainConfig, model_path: str) -> Run:
     sessions = previous_sessions(run_dir.path / SELECTION) if checkpoint is not None else []
     sessions.append(session_record(iteration=state.iteration, device=cfg.model.device))
     return Run(cfg, run_dir, scene, plan, selector, background_color(cfg.model), raster_settings(cfg.pipeline), state,
-               rng, PositionLRSchedule.from_config(cfg.optim, scene.extent), sessions=sessions, stage_selectors=by_stage)
+               rng, PositionLRSchedule.from_config(cfg.optim, scene.extent), sessions=sessions,
+               stage_selectors=by_stage)
 
 
 def previous_sessions(selection_path: Path) -> list[dict[str, Any]]:

@@ -75,7 +75,8 @@ class AutoSelector(Selector):
             return StepChoice(self.fisher, f"auto: {num_captured} captured views, {trained}: the Fisher's picks "
                                            f"(lite_gs, eps {c.eps}), as from {c.auto_min_views} views trained "
                                            f"{c.auto_min_iters_per_view} iterations each (measured: above coverage "
-                                           f"on 7 of 8 scenes, 0.3 dB below it on mic)")
+                                           f"on 7 of 8 scenes and 0.3 dB below it on mic with fixed seed views; "
+                                           f"0.8 dB above it on mic with seed views drawn per seed)")
         compared = ", compared with coverage's" if c.pool_compare == "coverage" else ""
         return StepChoice(self.geometric, f"auto: {num_captured} captured views, {trained}: at this stage of training "
                                           f"the picks are geometric (cover_pool{compared}); the Fisher (lite_gs) from "

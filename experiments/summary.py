@@ -52,6 +52,7 @@ class Run:
     sessions: list[dict] = field(default_factory=list)  # selection.json "sessions": code, machine, date per start
     job_seconds: float | None = None  # train + render + metrics wall time of its grid jobs (JOB_TIMES, else
     # grid_status.json's last invocation)
+    protocol: str = ""  # the run's departures from the setup's protocol that change its views ('' for none)
 
     @property
     def options_label(self) -> str:
@@ -72,8 +73,20 @@ class Run:
 
     @property
     def setting(self) -> str:
-        """Method label with the settings that vary within a setup: K and the selector's options."""
-        return " ".join(part for part in (self.method, f"K={self.k}", self.options_label) if part)
+        """Method label with the settings that vary within a setup: K, the selector's options and the protocol's
+        departures (so runs with other seed views or another selector at some acquisition are never pooled)."""
+        return " ".join(part for part in (self.method, f"K={self.k}", self.options_label, self.protocol) if part)
+
+
+def protocol_label(cfg: dict) -> str:
+    """'seed_start=random' and 'stage_method=S:NAME,...' where a run's recorded config departs from the default
+    seed views or has another selector at some acquisition ('' for neither)."""
+    words = []
+    if cfg.get("seed_start", "first") != "first":
+        words.append(f"seed_start={cfg['seed_start']}")
+    if cfg.get("stage_method"):
+        words.append("stage_method=" + ",".join(cfg["stage_method"]))
+    return " ".join(words)
 
 
 def _read_json(path: Path, kind: type = dict) -> Any:
@@ -103,7 +116,7 @@ def load_run(model: Path) -> Run:
         cfg = {}
     options = cfg.get("selector_options")
     run = Run(model, setup, scene, str(cfg.get("method") or "?"), int(cfg.get("views_per_step", 0)),
-              options if isinstance(options, dict) else {}, int(cfg.get("seed", -1)))
+              options if isinstance(options, dict) else {}, int(cfg.get("seed", -1)), protocol=protocol_label(cfg))
     if isinstance(sel, dict):
         run.stages = [s for s in sel.get("stages", []) if isinstance(s, dict)]
         run.final = sel.get("final")

@@ -283,3 +283,19 @@ def test_views_table_averages_each_view_count_over_the_complete_seeds(tmp_path):
     md = summarize.views_tables(summarize.views_rows(runs))
     assert "### setup1, lego" in md and "| method | 2 views | 5 views | 8 views |" in md
     assert "| pop_gs K=3 | 10.00 ± 0.00 | 11.00 ± 0.00 | 20.50 ± 0.71 |" in md
+
+
+def test_runs_with_other_seed_views_or_stage_methods_are_never_pooled(tmp_path):
+    """Two grids of one method, one with the default seed views, one with --seed_start random and one with
+    --stage_method: three settings, each with its own seeds."""
+    for tag, extra in (("plain", {}), ("drawn", {"seed_start": "random"}),
+                       ("mixed", {"seed_start": "first", "stage_method": ["0:coverage"]})):
+        for seed in range(2):
+            model = make_run(tmp_path / tag, "setup1", "lego", "lite_gs", seed, "lite_gs", 2, 0.1, [(5, 4)],
+                             (20.0, 0.9, 0.1))
+            record = json.loads((model / "selection.json").read_text())
+            record["config"].update(extra)
+            (model / "selection.json").write_text(json.dumps(record))
+    runs = [summarize.load_run(m) for m in sorted(tmp_path.rglob("seed*"))]
+    assert sorted({r.setting for r in runs}) == ["lite_gs K=2 eps=0.1", "lite_gs K=2 eps=0.1 seed_start=random",
+                                                 "lite_gs K=2 eps=0.1 stage_method=0:coverage"]

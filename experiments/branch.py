@@ -20,12 +20,11 @@ from typing import Any
 
 from experiments.method_spec import method_flags
 from experiments.paired import PairedDifference, difference_cells, paired_difference
-from experiments.replay import check_grid_run, logged_argv
-from training.config import TrainConfig, parse_config
+from experiments.replay import check_grid_run, logged_config
 from training.engine import training
-from utils.checkpoint import CHECKPOINT_FORMAT_VERSION, RunDirectory, load_checkpoint
+from utils.checkpoint import RunDirectory, load_checkpoint
 from utils.errors import UserError
-from utils.io import read_json, save_torch, write_json
+from utils.io import read_json, write_json
 from utils.model_dir import CFG_ARGS, SELECTION, checkpoint_file
 
 
@@ -94,23 +93,15 @@ def run_branch(run_dir: Path, spec: str, out: Path, train_args: tuple[str, ...] 
                         f"{list(train_args)}; give these flags their own --out")
     ckpt = acquisition_checkpoint(run_dir, stage)
     undone = ckpt["stage"] - 1  # the acquisition the branch makes again
-    argv = logged_argv(run_dir)
-    argv[argv.index("-m") + 1] = str(target)
-    cfg = parse_config([*argv, "--quiet", *train_args, *stage_flags(spec, undone)])
+    cfg = logged_config(run_dir, target, (*train_args, *stage_flags(spec, undone)))
     if not RunDirectory(target).checkpoints():
         start = undo_last_acquisition(ckpt)
         target.mkdir(parents=True, exist_ok=True)
         write_json(target / CFG_ARGS, {**cfg.to_dict(), "branch_of": str(run_dir), "branch_iteration":
                                        start["iteration"], "branch_train_args": list(train_args)})
-        write_start(target, start, cfg)
+        RunDirectory(target).save_checkpoint({**start, "config": cfg.to_dict()})
     training(cfg)
     return target
-
-
-def write_start(model_dir: Path, start: dict[str, Any], cfg: TrainConfig) -> None:
-    """Put checkpoint `start` (an undone acquisition's) in `model_dir`, where train.py with `cfg` resumes from it."""
-    save_torch(checkpoint_file(model_dir, start["iteration"]),
-               {**start, "format_version": CHECKPOINT_FORMAT_VERSION, "config": cfg.to_dict()})
 
 
 def final_psnr(model_dir: Path) -> float:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import statistics
-import tempfile
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -18,10 +17,9 @@ import numpy as np
 
 from active.fisher import build_oracle
 from arguments import FisherSettings
-from experiments.branch import acquisition_checkpoint, branch_dir, final_psnr, undo_last_acquisition, write_start
-from experiments.replay import logged_argv
-from training.config import parse_config
-from training.engine import Run, close_run, open_run
+from experiments.branch import acquisition_checkpoint, branch_dir, final_psnr, undo_last_acquisition
+from experiments.replay import reopened
+from training.engine import Run
 from utils.io import read_json
 from utils.model_dir import SELECTION
 from utils.uncertainty_metrics import spearman
@@ -32,17 +30,8 @@ def model_at(run_dir: Path, stage: int | None) -> Iterator[tuple[Run, dict[str, 
     """The run opened (in a temporary directory) as it stood before acquisition `stage` (None: its last), and that
     acquisition's record."""
     ckpt = acquisition_checkpoint(run_dir, stage)
-    start = undo_last_acquisition(ckpt)
-    argv = logged_argv(run_dir)
-    with tempfile.TemporaryDirectory() as tmp:
-        argv[argv.index("-m") + 1] = tmp
-        cfg = parse_config([*argv, "--quiet"])
-        write_start(Path(tmp), start, cfg)
-        run = open_run(cfg, tmp)
-        try:
-            yield run, ckpt["stages"][-1]
-        finally:
-            close_run(run)
+    with reopened(run_dir, undo_last_acquisition(ckpt)) as (run, _):
+        yield run, ckpt["stages"][-1]
 
 
 def set_information(run: Run, picks: list[int]) -> float:

@@ -1,18 +1,21 @@
-"""Replay a grid run's first acquisition: its model trained again, in a temporary directory, from the train.py
-command scripts/grid.py logged, up to the first selection (the same machine replays the same floats). Used by
-scripts/selection_fit.py and scripts/pick_objective.py, which also read back their saved rows here (`saved_rows`)."""
+"""Replay a grid run from the train.py command scripts/grid.py logged: its config written elsewhere
+(`logged_config`), the run opened again in a temporary directory from scratch or from a checkpoint (`reopened`), and
+its model trained again up to the first selection (`first_acquisition`; the same machine replays the same floats).
+Used by scripts/selection_fit.py, pick_objective.py, branch_pick.py and pick_information.py, which also read back
+their saved rows here (`saved_rows`)."""
 from __future__ import annotations
 
 import contextlib
 import shlex
 import tempfile
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 from tqdm import tqdm
 
 from training.config import TrainConfig, parse_config
 from training.engine import Run, close_run, open_run, train_stage
+from utils.checkpoint import RunDirectory
 from utils.errors import UserError
 from utils.io import read_json
 
@@ -40,19 +43,34 @@ def logged_argv(run_dir: Path) -> list[str]:
     return words[start:]
 
 
-@contextlib.contextmanager
-def first_acquisition(run_dir: Path) -> Iterator[tuple[Run, TrainConfig]]:
-    """The open run (scene, settings, state) trained again up to `run_dir`'s first acquisition, and its config."""
+def logged_config(run_dir: Path, model_path: str | Path, extra: tuple[str, ...] = ()) -> TrainConfig:
+    """The config of `run_dir`'s logged train.py command, writing to `model_path`, quiet, `extra` flags after its own."""
     argv = logged_argv(run_dir)
+    argv[argv.index("-m") + 1] = str(model_path)
+    return parse_config([*argv, "--quiet", *extra])
+
+
+@contextlib.contextmanager
+def reopened(run_dir: Path, start: dict[str, Any] | None = None) -> Iterator[tuple[Run, TrainConfig]]:
+    """`run_dir`'s logged command opened in a temporary directory, from scratch or resuming checkpoint `start` (e.g. an
+    acquisition undone), and its config."""
     with tempfile.TemporaryDirectory() as tmp:
-        argv[argv.index("-m") + 1] = tmp
-        cfg = parse_config(argv + ["--quiet"])
+        cfg = logged_config(run_dir, tmp)
+        if start is not None:
+            RunDirectory(tmp).save_checkpoint({**start, "config": cfg.to_dict()})
         run = open_run(cfg, tmp)
         try:
-            train_stage(run, tqdm(disable=True))
             yield run, cfg
         finally:
             close_run(run)
+
+
+@contextlib.contextmanager
+def first_acquisition(run_dir: Path) -> Iterator[tuple[Run, TrainConfig]]:
+    """The open run (scene, settings, state) trained again up to `run_dir`'s first acquisition, and its config."""
+    with reopened(run_dir) as (run, cfg):
+        train_stage(run, tqdm(disable=True))
+        yield run, cfg
 
 
 def saved_rows(path: Path, what: str) -> list[dict]:

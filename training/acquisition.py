@@ -25,12 +25,16 @@ from training.step import mean_psnr
 from utils.errors import UserError
 
 
+def check_view_ids(ids: tuple[int, ...], pool: int, flag: str) -> None:
+    """One error line unless `ids` (the values of train.py's `flag`) are distinct view ids in [0, pool)."""
+    if any(not 0 <= v < pool for v in ids) or len(set(ids)) != len(ids):
+        raise UserError(f"{flag} must be distinct view ids in [0, {pool}); got {list(ids)}")
+
+
 def allowed_views(cfg: TrainConfig, pool: int) -> list[int]:
     """The training view ids a run may seed or pick: all but --exclude_views (checked: distinct ids in the pool)."""
+    check_view_ids(cfg.active.exclude_views, pool, "--exclude_views")
     excluded = set(cfg.active.exclude_views)
-    if any(not 0 <= v < pool for v in excluded) or len(excluded) != len(cfg.active.exclude_views):
-        raise UserError(f"--exclude_views must be distinct view ids in [0, {pool}); "
-                        f"got {list(cfg.active.exclude_views)}")
     return [v for v in range(pool) if v not in excluded]
 
 
@@ -42,9 +46,7 @@ def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
     a = cfg.active
     allowed = allowed_views(cfg, pool)
     if a.init_views:
-        bad = [v for v in a.init_views if not 0 <= v < pool]
-        if bad or len(set(a.init_views)) != len(a.init_views):
-            raise UserError(f"--init_views must be distinct view ids in [0, {pool}); got {list(a.init_views)}")
+        check_view_ids(a.init_views, pool, "--init_views")
         if excluded := sorted(set(a.init_views) & set(a.exclude_views)):
             raise UserError(f"--init_views {excluded} are also in --exclude_views; "
                             "seed from views that can be captured")

@@ -191,12 +191,11 @@ def acquire(run: Run, progress: tqdm) -> None:
     state, cfg = run.state, run.cfg
     k = run.plan.adds[state.stage]
     candidates = len(candidate_views(state, run.scene, cfg))
-    selector = run.selector_at(state.stage)
+    selector, overridden = run.selector_at(state.stage), state.stage in run.stage_selectors
     progress.write(f"[stage {state.stage}] selecting {k} of {candidates} candidates with {selector.name}"
-                   + (f" (--stage_method; the run's --method is {cfg.active.method})"
-                      if state.stage in run.stage_selectors else ""))
+                   + (f" (--stage_method; the run's --method is {cfg.active.method})" if overridden else ""))
     record = acquire_views(state, run.scene, cfg, selector, k, run.background, run.settings)
-    if state.stage in run.stage_selectors:
+    if overridden:
         record = {**record, "stage_method": selector.name}
     for line in (record.get("rule"), record.get("note")):
         if line is not None:

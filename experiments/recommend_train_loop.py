@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import random
 import statistics
 import subprocess
 import sys
@@ -13,7 +14,7 @@ from pathlib import Path
 
 from experiments.jobs import THREAD_VARS
 from experiments.method_spec import method_flags
-from experiments.seed_dataset import make_seed_dataset
+from experiments.seed_dataset import SeedDataset, make_seed_dataset, training_centers
 from utils import model_dir
 from utils.checkpoint import RunDirectory
 from utils.errors import UserError
@@ -37,10 +38,19 @@ def run(cmd: list[str], threads: int, log: Path) -> float:
 def summary_table(results: dict, methods: list[str], seeds: list[int]) -> str:
     """Per-seed test PSNR and mean +- std per method, with the picks and oracle counts."""
     s = results["settings"]
-    lines = [f"Seed views {s['seed_views']} ({s['base_iterations']} iterations: base test PSNR "
-             f"{s['base_test_psnr']:.2f} dB); +{s['k']} views from {s['candidates']} candidate poses, then "
+    if isinstance(s["seed_views"], dict):  # --seed_start random: one seed-view set and base model per seed
+        notes = s.get("seed_data", {})
+        per_seed = "; ".join(f"seed {x}: {s['seed_views'][str(x)]}, {s['base_test_psnr'][str(x)]:.2f} dB"
+                             + (f" ({notes[str(x)]})" if str(x) in notes else "") for x in seeds)
+        base = f"Seed views drawn per seed (`--seed_start random`; base test PSNR after {s['base_iterations']} " \
+               f"iterations): {per_seed}"
+    else:
+        base = f"Seed views {s['seed_views']} ({s['base_iterations']} iterations: base test PSNR " \
+               f"{s['base_test_psnr']:.2f} dB)"
+    note = s.get("seed_data") if isinstance(s.get("seed_data"), str) else ""
+    lines = [f"{base}; +{s['k']} views from {s['candidates']} candidate poses, then "
              f"{s['iterations']} iterations from the base model (`--init_ply`), -r {s['resolution']}, "
-             f"`{s['train_args']}`." + (f" {s['seed_data']}." if s.get("seed_data") else ""), "",
+             f"`{s['train_args']}`." + (f" {note}." if note else ""), "",
              "| added views from | " + " | ".join(f"seed {x}" for x in seeds) + " | mean ± std | picks (seed "
              f"{seeds[0]}) | oracles evaluated / conservative |",
              "|---|" + "---|" * len(seeds) + "---|---|---|"]
@@ -98,41 +108,72 @@ def compare_table(results: dict[str, dict], methods: list[str] | None = None) ->
     return "\n".join(lines) + "\n"
 
 
+SEED_STARTS = ("first", "random")  # the first seed view: training view 0, or one drawn with each --seeds value
+
+
+def first_seed_view(seed_start: str, seed: int, data: Path) -> int:
+    """The training view farthest-point seeding starts from: 0, or one drawn with `seed` (train.py's draw for
+    --seed_start random without --exclude_views)."""
+    return random.Random(seed).randrange(len(training_centers(data))) if seed_start == "random" else 0
+
+
+def train_flags(args: argparse.Namespace) -> list[str]:
+    """The train.py flags the seed model and every continued training share."""
+    return ["-r", args.resolution, "--eval", "-q", *args.train_args.split()]
+
+
+def seed_model(args: argparse.Namespace, folder: Path, start: int, select_at: int) -> tuple[SeedDataset, Path, float]:
+    """The seed-view dataset in FOLDER/data (seeding from view `start`) and the model trained on it in FOLDER/base
+    (reused when complete): the dataset, the base model's folder and its test PSNR."""
+    seed_data = make_seed_dataset(Path(args.data), folder, args.num_seed_views, images=args.images,
+                                  seed_points=args.seed_points, start=start)  # a bad --data: nothing written
+    print(f"seed views {seed_data.seeds}; {len(seed_data.candidates)} candidate poses in {seed_data.candidate_poses} "
+          "(their images are not in that folder)" + (f"; {seed_data.note}" if seed_data.note else ""))
+    base = folder / "base"
+    if not RunDirectory(base).is_complete():
+        (folder / "logs").mkdir(parents=True, exist_ok=True)
+        secs = run(["train.py", "-s", str(seed_data.folder), "-m", str(base), "--iterations",
+                    str(args.base_iterations), "--save_iterations", str(select_at), "--overwrite",
+                    *seed_data.seed_flags, *train_flags(args)], args.threads, folder / "logs" / "base.log")
+        print(f"base model on {len(seed_data.seeds)} views: {secs:.0f} s")
+    if not model_dir.point_cloud_ply(base, select_at).is_file():
+        raise UserError(f"{base} has no point cloud at iteration {select_at} (--select_iteration); use a new -o to "
+                        "train a base model that saves it")
+    return seed_data, base, read_json(base / model_dir.RUN_STATUS)["test_psnr"]
+
+
 def run_recommend_then_train(args: argparse.Namespace) -> None:
-    """The whole experiment for scripts/recommend_then_train.py's parsed flags (`args`): the seed-view model, then per
-    method and seed recommend.py and the continued training; writes OUT/results.json and OUT/summary.md, reusing the
+    """The whole experiment for scripts/recommend_then_train.py's parsed flags (`args`): per seed the seed-view model
+    (one for all seeds in OUT/base with --seed_start first; one per seed in OUT/seedS/base with random), then per
+    method recommend.py and the continued training; writes OUT/results.json and OUT/summary.md, reusing the
     finished steps."""
     data, out = Path(args.data), Path(args.output)
     select_at = args.base_iterations if args.select_iteration is None else args.select_iteration
     if not 0 < select_at <= args.base_iterations:
         raise UserError(f"--select_iteration must lie in [1, --base_iterations = {args.base_iterations}], got "
                         f"{select_at}")
-    seed_data = make_seed_dataset(data, out, args.num_seed_views, images=args.images,
-                                  seed_points=args.seed_points)  # a bad --data: nothing written
-    (out / "logs").mkdir(parents=True, exist_ok=True)
-    seeds, candidates = seed_data.seeds, seed_data.candidates
-    print(f"seed views {seeds}; {len(candidates)} candidate poses in {seed_data.candidate_poses} (their images are "
-          "not in that folder)" + (f"; {seed_data.note}" if seed_data.note else ""))
-    common = ["-r", args.resolution, "--eval", "-q", *args.train_args.split()]
-    base = out / "base"
-    if not RunDirectory(base).is_complete():
-        secs = run(["train.py", "-s", str(seed_data.folder), "-m", str(base), "--iterations",
-                    str(args.base_iterations), "--save_iterations", str(select_at), "--overwrite",
-                    *seed_data.seed_flags, *common], args.threads,
-                   out / "logs" / "base.log")
-        print(f"base model on {len(seeds)} views: {secs:.0f} s")
-    base_status = read_json(base / model_dir.RUN_STATUS)
-    base_ply = model_dir.point_cloud_ply(base, args.base_iterations)
-    if not model_dir.point_cloud_ply(base, select_at).is_file():
-        raise UserError(f"{base} has no point cloud at iteration {select_at} (--select_iteration); use a new -o to "
-                        "train a base model that saves it")
+    drawn = args.seed_start == "random"
     results_path = out / "results.json"
     results = read_json(results_path, missing="none", fix="delete it to run every step again") or {}
-    results["settings"] = {**vars(args), "seed_views": seeds, "candidates": len(candidates),
-                           "base_test_psnr": base_status["test_psnr"], **({"seed_data": seed_data.note}
-                                                                          if seed_data.note else {})}
-    for method in args.methods:
-        for seed in args.seeds:
+    earlier = results.get("settings", {})
+    per_seed = {k: dict(earlier.get(k, {})) if drawn and isinstance(earlier.get(k), dict) else {}
+                for k in ("seed_views", "base_test_psnr", "seed_data")}  # drawn: seeds of earlier calls kept
+    for seed in args.seeds:
+        folder = out / f"seed{seed}" if drawn else out
+        seed_data, base, base_psnr = seed_model(args, folder, first_seed_view(args.seed_start, seed, data), select_at)
+        seeds, candidates = seed_data.seeds, seed_data.candidates
+        (out / "logs").mkdir(parents=True, exist_ok=True)
+        base_ply = model_dir.point_cloud_ply(base, args.base_iterations)
+        if drawn:
+            for k, v in (("seed_views", seeds), ("base_test_psnr", base_psnr), ("seed_data", seed_data.note)):
+                if v != "":
+                    per_seed[k][str(seed)] = v
+            described = per_seed
+        else:
+            described = {"seed_views": seeds, "base_test_psnr": base_psnr,
+                         **({"seed_data": seed_data.note} if seed_data.note else {})}
+        results["settings"] = {**vars(args), "candidates": len(candidates), **described}
+        for method in args.methods:
             key = f"{method}/seed{seed}"
             row = results.get(key, {})
             if method != "none" and "picks" not in row:
@@ -151,7 +192,7 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
                     ["train.py", "-s", str(data), "-m", str(model), "--method", "random", "--init_views",
                      *map(str, views), "--max_views", str(len(views)), "--views_per_step", str(args.k),
                      "--iterations", str(args.iterations), "--init_ply", str(base_ply), "--seed", str(seed),
-                     "--overwrite", *seed_data.full_flags, *common], args.threads,
+                     "--overwrite", *seed_data.full_flags, *train_flags(args)], args.threads,
                     out / "logs" / f"continue_{method}_{seed}.log")
                 row["test_psnr"] = read_json(model / model_dir.RUN_STATUS)["test_psnr"]
             results[key] = row
@@ -159,4 +200,3 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
             print(f"{key}: views {views} -> test PSNR {row['test_psnr']:.2f} dB")
     (out / "summary.md").write_text(summary_table(results, args.methods, args.seeds))
     print((out / "summary.md").read_text())
-

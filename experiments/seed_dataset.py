@@ -1,11 +1,11 @@
 """The seed-view dataset of recommend-then-train: a folder holding the images of S seed views and the test split, and
 the poses (never the images) of the other training views, the candidates. Blender and COLMAP datasets.
 
-Seeds are farthest-point samples of the training cameras' centres (as train.py seeds). On COLMAP, the seed folder's
-SfM points are the points that a seed image observes, so that the seed model starts from the geometry its S captures
-see, not from all the points triangulated with the candidates' images. (Asking for two seed observations keeps almost
-nothing: sequential matching links only neighbouring images, and farthest-point seeds are far apart: 10 of bonsai's
-35,102 points.) `seed_points="all"` keeps every point instead, as train.py's Setup 1 initialises from the whole SfM
+Seeds are farthest-point samples of the training cameras' centres from a given first view (as train.py seeds). On
+COLMAP, the seed folder's SfM points are the points that a seed image observes, so that the seed model starts from
+the geometry its S captures see, not from all the points triangulated with the candidates' images. (Asking for two
+seed observations keeps almost nothing: sequential matching links only neighbouring images, and farthest-point seeds
+are far apart: 10 of bonsai's 35,102 points.) `seed_points="all"` keeps every point instead, as train.py's Setup 1 initialises from the whole SfM
 model: a diagnosis (what the Fisher does when the model already holds Gaussians where no capture looked), not a
 capture a user could make.
 """
@@ -43,17 +43,18 @@ class SeedDataset:
 
 
 def make_seed_dataset(data: Path, out: Path, num_seed: int, *, images: str = "images",
-                      seed_points: str = "observed") -> SeedDataset:
+                      seed_points: str = "observed", start: int = 0) -> SeedDataset:
     """OUT/data for a Blender (transforms_train/test.json) or COLMAP (sparse/0) dataset `data`; `images` is
     train.py's -i of a COLMAP dataset, whose test split is train.py's --eval split; `seed_points` (COLMAP): keep the
-    SfM points a seed view observes, or all. Raises UserError for any other layout, a missing image, or candidate
-    images present in OUT/data."""
+    SfM points a seed view observes, or all; `start`: the training view farthest-point sampling starts from (the
+    first seed view). Raises UserError for any other layout, a missing image, or candidate images present in
+    OUT/data."""
     if seed_points not in SEED_POINTS:
         raise UserError(f"--seed_points must be one of {', '.join(SEED_POINTS)}, got {seed_points!r}")
     if (data / "transforms_train.json").is_file() and (data / "transforms_test.json").is_file():
-        return _blender_seed_dataset(data, out / "data", num_seed)
+        return _blender_seed_dataset(data, out / "data", num_seed, start)
     if (data / "sparse" / "0").is_dir():
-        return _colmap_seed_dataset(data, out / "data", num_seed, images, seed_points == "all")
+        return _colmap_seed_dataset(data, out / "data", num_seed, images, seed_points == "all", start)
     raise UserError(f"{data} is neither a Blender dataset (transforms_train.json and transforms_test.json) nor a "
                     "COLMAP one (sparse/0); point --data at one (convert.py makes a COLMAP one from photographs)")
 
@@ -76,11 +77,23 @@ def _link(src: Path, dst: Path) -> None:
         dst.symlink_to(src.resolve())
 
 
-def _blender_seed_dataset(data: Path, folder: Path, num_seed: int) -> SeedDataset:
+def seed_views(data: Path, num_seed: int, start: int) -> list[int]:
+    """Farthest-point sampling of `num_seed` of the training views' camera centres from view `start` (train.py's
+    seeding). Raises UserError when either is out of range."""
+    centers = training_centers(data)
+    if not 0 < num_seed <= len(centers):
+        raise UserError(f"--num_seed_views must lie in [1, {len(centers)}] (the dataset's training views), "
+                        f"got {num_seed}")
+    if not 0 <= start < len(centers):
+        raise UserError(f"the first seed view must be a training view id in [0, {len(centers) - 1}], got {start}")
+    return farthest_point_views(centers, num_seed, start)
+
+
+def _blender_seed_dataset(data: Path, folder: Path, num_seed: int, start: int) -> SeedDataset:
     train = read_json(data / "transforms_train.json", what="dataset split", fix="fix or regenerate it")
     test = read_json(data / "transforms_test.json", what="dataset split", fix="fix or regenerate it")
     frames = train["frames"]
-    seeds = farthest_point_views(training_centers(data), num_seed)
+    seeds = seed_views(data, num_seed, start)
     candidates = [v for v in range(len(frames)) if v not in seeds]
     for frame in [frames[v] for v in seeds] + test["frames"]:
         ext = next((e for e in IMAGE_EXTENSIONS if (data / (frame["file_path"] + e)).is_file()), None)
@@ -97,13 +110,14 @@ def _blender_seed_dataset(data: Path, folder: Path, num_seed: int) -> SeedDatase
     return SeedDataset(folder, seeds, candidates, folder / "candidates.json", ["-w"], ["-w"])
 
 
-def _colmap_seed_dataset(data: Path, folder: Path, num_seed: int, images: str, all_points: bool) -> SeedDataset:
+def _colmap_seed_dataset(data: Path, folder: Path, num_seed: int, images: str, all_points: bool,
+                         start: int) -> SeedDataset:
     sparse = data / "sparse" / "0"
     cams, imgs, (xyz, rgb) = colmap_io.read_model(sparse)
     ordered = sorted(imgs.values(), key=lambda im: im.name)  # the readers' order; held_out() splits it
     train = [i for i in range(len(ordered)) if not held_out(i, LLFFHOLD)]
     test = [i for i in range(len(ordered)) if held_out(i, LLFFHOLD)]
-    seeds = farthest_point_views(training_centers(data), num_seed)
+    seeds = seed_views(data, num_seed, start)
     candidates = [v for v in range(len(train)) if v not in seeds]
     for i in [train[v] for v in seeds] + test:
         src = data / images / ordered[i].name

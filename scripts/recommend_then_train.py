@@ -6,6 +6,7 @@ and the test images (on COLMAP, with the SfM points that a seed view observes); 
 their *poses* (a pose file whose images are not in that folder, so no candidate image can be read) with recommend.py
 for each method and seed; then continue training the S-view model (`train.py --init_ply`) on the S + K views, the same
 iterations for every method, and record the test PSNR. Method "none" continues on the S views alone (the reference).
+With --seed_start random each seed draws its own first seed view, so it has its own seed views and base model.
 
     python scripts/recommend_then_train.py --data ../shared/data/lego --methods lite_gs coverage random none \
         --seeds 0 1 2 -o output/recommend_then_train
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 import argparse
 
-from experiments.recommend_train_loop import run_recommend_then_train
+from experiments.recommend_train_loop import SEED_STARTS, run_recommend_then_train
 from experiments.seed_dataset import SEED_POINTS
 from utils.errors import run_cli
 
@@ -36,6 +37,10 @@ def main() -> None:
                         "and 'none' (no new views)")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--num_seed_views", type=int, default=5)
+    p.add_argument("--seed_start", choices=SEED_STARTS, default="first",
+                   help="farthest-point seeding from training view 0, one seed model for every seed (first), or from a "
+                        "view drawn with each seed, one seed model per seed in OUT/seedS (random; a deterministic "
+                        "selector's seeds are then different view sets, not training noise around one)")
     p.add_argument("-k", type=int, default=4)
     p.add_argument("-r", "--resolution", default="8")
     p.add_argument("--base_iterations", type=int, default=1000, help="training of the seed-view model")

@@ -68,6 +68,16 @@ def test_colmap_seed_dataset_keeps_seed_images_test_split_and_seed_points(tmp_pa
         make_seed_dataset(data, tmp_path / "bad", 3, seed_points="some")
 
 
+def test_seed_dataset_starts_farthest_point_seeding_from_the_given_view(tiny_scene, tmp_path):
+    made = make_seed_dataset(tiny_scene, tmp_path / "from5", 4, start=5)
+    assert made.seeds[0] == 5 and made.seeds == farthest_point_views(training_centers(tiny_scene), 4, 5)
+    assert made.seeds != make_seed_dataset(tiny_scene, tmp_path / "from0", 4).seeds
+    with pytest.raises(UserError, match=r"first seed view must be a training view id in \[0, 13\], got 14"):
+        make_seed_dataset(tiny_scene, tmp_path / "bad", 4, start=14)
+    with pytest.raises(UserError, match=r"--num_seed_views must lie in \[1, 14\]"):
+        make_seed_dataset(tiny_scene, tmp_path / "bad", 15)
+
+
 def test_seed_dataset_refuses_other_layouts(tmp_path):
     with pytest.raises(UserError, match="neither a Blender dataset .* nor a COLMAP one"):
         make_seed_dataset(tmp_path, tmp_path / "out", 3)
@@ -91,6 +101,34 @@ def test_end_to_end_on_the_tiny_scene(tiny_scene, tmp_path):
         cfg = json.loads((out / "continue" / key.replace("/", "_") / "cfg_args").read_text())
         assert cfg["model"]["init_ply"].endswith("point_cloud.ply")  # continued from the seed model
     assert "| coverage |" in (out / "summary.md").read_text()
+
+
+@pytest.mark.slow
+def test_seed_start_random_gives_each_seed_its_own_seed_views_and_base_model(tiny_scene, tmp_path):
+    """--seed_start random: seed s seeds farthest-point from the view random.Random(s) draws (train.py's draw), trains
+    its own base model in OUT/seedS, and continues from it; the summary lists every seed's seed views."""
+    out = tmp_path / "rtt"
+    flags = ["--data", str(tiny_scene), "-o", str(out), "--methods", "coverage", "--num_seed_views", "3", "-k", "2",
+             "-r", "32", "--base_iterations", "20", "--iterations", "20", "--seed_start", "random",
+             "--train_args=--num_random_points 300 --densify_from_iter 10", "--threads", "1"]
+    r = run_cli(str(SCRIPT), *flags, "--seeds", "0", "1", timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    results = json.loads((out / "results.json").read_text())
+    drawn = results["settings"]["seed_views"]
+    centers = training_centers(tiny_scene)
+    for seed, start in ((0, 13), (1, 2)):  # random.Random(0).randrange(14) = 13, random.Random(1)... = 2
+        assert drawn[str(seed)] == farthest_point_views(centers, 3, start)
+        picks = results[f"coverage/seed{seed}"]["picks"]
+        status = json.loads((out / "continue" / f"coverage_seed{seed}" / "run_status.json").read_text())
+        assert status["train_views"] == drawn[str(seed)] + picks
+        cfg = json.loads((out / "continue" / f"coverage_seed{seed}" / "cfg_args").read_text())
+        assert cfg["model"]["init_ply"].startswith(str(out / f"seed{seed}" / "base"))
+    assert drawn["0"] != drawn["1"] and not (out / "base").exists()
+    r = run_cli(str(SCRIPT), *flags, "--seeds", "2", timeout=600)  # a later call adds a seed, keeping the others
+    assert r.returncode == 0, r.stdout + r.stderr
+    settings = json.loads((out / "results.json").read_text())["settings"]
+    assert sorted(settings["seed_views"]) == sorted(settings["base_test_psnr"]) == ["0", "1", "2"]
+    assert "Seed views drawn per seed" in (out / "summary.md").read_text()
 
 
 @pytest.mark.slow

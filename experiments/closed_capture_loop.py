@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import random
 import shutil
 import sys
 import time
@@ -42,6 +43,22 @@ def capture(dataset: Path, viewmats: list[torch.Tensor], resolution: int, seed: 
     return frames
 
 
+SEED_STARTS = ("first", "random")  # the start views: the fixed spiral, or the spiral turned by a seed-drawn azimuth
+
+
+def start_positions(seed_start: str, seed: int, count: int = 3) -> torch.Tensor:
+    """The loop's first `count` camera centres: `hemisphere_positions(count, 0.5)`, turned about the up axis (+z) by
+    an azimuth drawn with `seed` when `seed_start` is "random" (then each seed starts from other views, so a
+    deterministic selector's seeds are different view sets). [count, 3] float64"""
+    positions = hemisphere_positions(count, 0.5)
+    if seed_start == "first":
+        return positions
+    angle = random.Random(seed).uniform(0.0, 2 * math.pi)
+    c, s = math.cos(angle), math.sin(angle)
+    turn = torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], dtype=torch.float64)
+    return positions @ turn.T
+
+
 def train(dataset: Path, model: Path, iterations: int, seed: int, max_gaussians: int) -> float:
     """train.py on every captured view (from scratch); returns the test PSNR."""
     import subprocess
@@ -63,7 +80,7 @@ def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dic
                                  args.num_test)
     shutil.copytree(builtin / "test", dataset / "test")
     shutil.copy(builtin / "transforms_test.json", dataset / "transforms_test.json")
-    start = [look_at(eye) for eye in hemisphere_positions(3, 0.5)]
+    start = [look_at(eye) for eye in start_positions(args.seed_start, seed)]
     frames = capture(dataset, start, args.resolution, 0, 0)
     rounds = []
     while True:

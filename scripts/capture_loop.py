@@ -1,8 +1,9 @@
 """A closed capture loop on the built-in scene, the one scene that can be photographed from any pose.
 
-Start from 3 views; each round trains a model on the views captured so far (train.py, from scratch), recommends K
-of N generated hemisphere poses (recommender, no images), "captures" them by rendering the built-in ground
-truth there, and repeats until the view budget. Test PSNR (the built-in test split) is recorded after every
+Start from 3 views (the same for every seed, or turned by a seed-drawn azimuth with --seed_start random); each
+round trains a model on the views captured so far (train.py, from scratch), recommends K of N generated hemisphere
+poses (recommender, no images), "captures" them by rendering the built-in ground truth there, and repeats until the
+view budget. Test PSNR (the built-in test split) is recorded after every
 training, so each method gives a PSNR-vs-views curve.
 
     python scripts/capture_loop.py --methods lite_gs pop_gs coverage random --seeds 0 1 2 -o output/capture_loop
@@ -16,7 +17,7 @@ from __future__ import annotations
 
 import argparse
 
-from experiments.closed_capture_loop import run_capture_loop
+from experiments.closed_capture_loop import SEED_STARTS, run_capture_loop
 from utils.errors import run_cli
 
 
@@ -43,6 +44,9 @@ def main() -> None:
     p.add_argument("--candidates", type=int, default=30, help="generated hemisphere poses per round")
     p.add_argument("--elevation", type=elevation_range, default=(0.0, 80.0),
                    help="the candidates' elevation range LO,HI in degrees (default 0,80; the test views lie at 10-75)")
+    p.add_argument("--seed_start", choices=SEED_STARTS, default="first",
+                   help="start views: the same 3 for every seed (first), or those 3 turned about the up axis by an "
+                        "azimuth drawn with the seed (random)")
     p.add_argument("--iters_per_view", type=int, default=60, help="training iterations per captured view")
     p.add_argument("--max_gaussians", type=int, default=4000)
     p.add_argument("--plot", help="only rewrite the summary.md and draw the curve of an output folder")

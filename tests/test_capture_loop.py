@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from experiments.closed_capture_loop import FirstNoteOnly, capture, run_capture_loop, summary_table
+from experiments.closed_capture_loop import FirstNoteOnly, capture, run_capture_loop, start_positions, summary_table
 from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions
 from scene.cameras import look_at
 from scene.frames import GL_TO_CV
@@ -32,6 +32,18 @@ def test_capture_writes_images_and_frames_that_read_back_as_the_poses(tmp_path):
     assert len(cams) == 2 and math.isclose(cams[0].fx, 8 / math.tan(CAMERA_ANGLE_X / 2), rel_tol=1e-6)
     for cam, viewmat in zip(cams, viewmats):
         assert torch.allclose(cam.viewmat.double(), viewmat.double(), atol=1e-5)
+
+
+def test_random_start_turns_the_start_views_about_the_up_axis_by_a_seed_drawn_azimuth():
+    fixed = hemisphere_positions(3, 0.5)
+    assert torch.equal(start_positions("first", 7), fixed)
+    turned = {seed: start_positions("random", seed) for seed in (0, 1)}
+    for positions in turned.values():
+        assert torch.allclose(positions[:, 2], fixed[:, 2])  # same elevations
+        assert torch.allclose(torch.cdist(positions, positions), torch.cdist(fixed, fixed))  # a rotation
+        assert not torch.allclose(positions, fixed, atol=1e-3)
+    assert not torch.allclose(turned[0], turned[1], atol=1e-3)
+    assert torch.equal(start_positions("random", 0), turned[0])  # drawn from the seed alone
 
 
 def test_plot_only_draws_and_tables_every_method_folder(tmp_path):
@@ -86,8 +98,13 @@ def test_the_cli_runs_one_round(tmp_path):
     r = run_cli(str(ROOT / "scripts" / "capture_loop.py"), "--methods", "coverage", "--seeds", "0", "1", "-o", str(out),
                 "--resolution", "16", "--num_test", "2", "--budget", "5", "-k", "2", "--candidates", "6",
                 "--iters_per_view", "10", "--max_gaussians", "500", "--png", str(tmp_path / "psnr.png"),
-                "--elevation", "10,75", timeout=600)
+                "--elevation", "10,75", "--seed_start", "random", timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
+    for seed in (0, 1):  # each seed started from its own turned views
+        frames = json.loads((out / "coverage" / f"seed{seed}" / "data" / "transforms_train.json").read_text())["frames"]
+        centres = torch.tensor([[f["transform_matrix"][i][3] for i in range(3)] for f in frames[:3]],
+                               dtype=torch.float64)
+        assert torch.allclose(centres, start_positions("random", seed), atol=1e-5)
     loop = json.loads((out / "coverage" / "seed0" / "loop.json").read_text())
     assert [r["views"] for r in loop["rounds"]] == [3, 5]
     assert loop["settings"]["plot"] is None and loop["settings"]["budget"] == 5

@@ -41,7 +41,7 @@ def summary_table(results: dict, methods: list[str], seeds: list[int]) -> str:
     if isinstance(s["seed_views"], dict):  # --seed_start random: one seed-view set and base model per seed
         notes = s.get("seed_data", {})
         per_seed = "; ".join(f"seed {x}: {s['seed_views'][str(x)]}, {s['base_test_psnr'][str(x)]:.2f} dB"
-                             + (f" ({notes[str(x)]})" if str(x) in notes else "") for x in seeds)
+                             + (f", {notes[str(x)]}" if str(x) in notes else "") for x in seeds)
         base = f"Seed views drawn per seed (`--seed_start random`; base test PSNR after {s['base_iterations']} " \
                f"iterations): {per_seed}"
     else:

@@ -167,7 +167,8 @@ def test_recommend_tables_change_when_a_result_changes(tmp_path):
     import json
     from scripts import recommend_tables
     src = os.path.join(ROOT, "docs", "results")
-    for _, folder in recommend_tables.SCENES + recommend_tables.HELDOUT + recommend_tables.DEFAULT_CHECKS:
+    for _, folder in (recommend_tables.SCENES + recommend_tables.HELDOUT + recommend_tables.DRAWN
+                      + recommend_tables.DEFAULT_CHECKS):
         shutil.copytree(os.path.join(src, folder), tmp_path / folder)
     path = tmp_path / "rtt_bonsai" / "results.json"
     results = json.loads(path.read_text())
@@ -179,6 +180,7 @@ def test_recommend_tables_change_when_a_result_changes(tmp_path):
     assert changed["rtt_lego_official"] == committed["rtt_lego_official"]
     assert changed["rtt_compare_heldout"] == committed["rtt_compare_heldout"]
     assert changed["rtt_clutter4"] == committed["rtt_clutter4"]
+    assert changed["rtt_compare_rstart"] == committed["rtt_compare_rstart"]
 
 
 def test_modes_table_rows_and_ratio_to_pop_gs(tmp_path):

@@ -156,6 +156,9 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
     results_path = out / "results.json"
     results = read_json(results_path, missing="none", fix="delete it to run every step again") or {}
     earlier = results.get("settings", {})
+    if results and earlier.get("seed_start", "first") != args.seed_start:
+        raise UserError(f"{results_path} holds runs with --seed_start {earlier.get('seed_start', 'first')}; use a new "
+                        f"-o for --seed_start {args.seed_start}")
     per_seed = {k: dict(earlier.get(k, {})) if drawn and isinstance(earlier.get(k), dict) else {}
                 for k in ("seed_views", "base_test_psnr", "seed_data")}  # drawn: seeds of earlier calls kept
     for seed in args.seeds:

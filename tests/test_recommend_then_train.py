@@ -131,6 +131,17 @@ def test_seed_start_random_gives_each_seed_its_own_seed_views_and_base_model(tin
     assert "Seed views drawn per seed" in (out / "summary.md").read_text()
 
 
+def test_an_output_folder_keeps_one_seed_start(tiny_scene, tmp_path):
+    """Results of the shared seed views are never reused as a drawn seed's (or the other way), before any training."""
+    out = tmp_path / "rtt"
+    out.mkdir()
+    (out / "results.json").write_text(json.dumps({"settings": {}, "coverage/seed0": {"picks": [1, 2]}}))
+    r = run_cli(str(SCRIPT), "--data", str(tiny_scene), "-o", str(out), "--seed_start", "random")
+    assert r.returncode == 2 and r.stderr.strip().splitlines() == [
+        f"error: {out / 'results.json'} holds runs with --seed_start first; use a new -o for --seed_start random"]
+    assert sorted(p.name for p in out.iterdir()) == ["results.json"]
+
+
 @pytest.mark.slow
 def test_select_iteration_recommends_on_the_earlier_model_and_continues_from_the_last(tiny_scene, tmp_path):
     out = tmp_path / "rtt"

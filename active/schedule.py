@@ -1,12 +1,22 @@
 """The acquisition schedule: seed views, how many views each step adds, and how long each stage trains."""
 from __future__ import annotations
 
+import random
 from dataclasses import dataclass
 
 import torch
 
 from active.farthest_point import farthest_point_picks
 from utils.errors import UserError
+
+
+SEED_STARTS = ("first", "random")  # where farthest-point seeding starts: the first view, or one drawn with the seed
+
+
+def first_seed_index(seed_start: str, seed: int, num_views: int) -> int:
+    """The index among `num_views` views that farthest-point seeding starts from: 0 ("first"), or one drawn with
+    `seed` ("random"; its own generator, so a run's other random streams are untouched)."""
+    return random.Random(seed).randrange(num_views) if seed_start == "random" else 0
 
 
 def farthest_point_views(centers: torch.Tensor, n: int, start: int = 0) -> list[int]:

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import random
 import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from active.schedule import first_seed_index
 from experiments.jobs import THREAD_VARS
 from experiments.method_spec import method_flags
 from experiments.seed_dataset import SeedDataset, make_seed_dataset, training_centers
@@ -108,15 +108,6 @@ def compare_table(results: dict[str, dict], methods: list[str] | None = None) ->
     return "\n".join(lines) + "\n"
 
 
-SEED_STARTS = ("first", "random")  # the first seed view: training view 0, or one drawn with each --seeds value
-
-
-def first_seed_view(seed_start: str, seed: int, data: Path) -> int:
-    """The training view farthest-point seeding starts from: 0, or one drawn with `seed` (train.py's draw for
-    --seed_start random without --exclude_views)."""
-    return random.Random(seed).randrange(len(training_centers(data))) if seed_start == "random" else 0
-
-
 def train_flags(args: argparse.Namespace) -> list[str]:
     """The train.py flags the seed model and every continued training share."""
     return ["-r", args.resolution, "--eval", "-q", *args.train_args.split()]
@@ -161,21 +152,22 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
                         f"-o for --seed_start {args.seed_start}")
     per_seed = {k: dict(earlier.get(k, {})) if drawn and isinstance(earlier.get(k), dict) else {}
                 for k in ("seed_views", "base_test_psnr", "seed_data")}  # drawn: seeds of earlier calls kept
+    num_views = len(training_centers(data)) if drawn else 1  # only a drawn start needs the count
     for seed in args.seeds:
         folder = out / f"seed{seed}" if drawn else out
-        seed_data, base, base_psnr = seed_model(args, folder, first_seed_view(args.seed_start, seed, data), select_at)
+        start = first_seed_index(args.seed_start, seed, num_views)  # train.py's draw (without --exclude_views)
+        seed_data, base, base_psnr = seed_model(args, folder, start, select_at)
         seeds, candidates = seed_data.seeds, seed_data.candidates
         (out / "logs").mkdir(parents=True, exist_ok=True)
         base_ply = model_dir.point_cloud_ply(base, args.base_iterations)
-        if drawn:
-            for k, v in (("seed_views", seeds), ("base_test_psnr", base_psnr), ("seed_data", seed_data.note)):
-                if v != "":
+        described = {"seed_views": seeds, "base_test_psnr": base_psnr, "seed_data": seed_data.note}
+        if drawn:  # one entry per seed, in dicts keyed by the seed
+            for k, v in described.items():
+                if v != "":  # no note
                     per_seed[k][str(seed)] = v
             described = per_seed
-        else:
-            described = {"seed_views": seeds, "base_test_psnr": base_psnr,
-                         **({"seed_data": seed_data.note} if seed_data.note else {})}
-        results["settings"] = {**vars(args), "candidates": len(candidates), **described}
+        results["settings"] = {**vars(args), "candidates": len(candidates),
+                               **{k: v for k, v in described.items() if v not in ("", {})}}
         for method in args.methods:
             key = f"{method}/seed{seed}"
             row = results.get(key, {})

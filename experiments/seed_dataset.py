@@ -5,9 +5,9 @@ Seeds are farthest-point samples of the training cameras' centres from a given f
 COLMAP, the seed folder's SfM points are the points that a seed image observes, so that the seed model starts from
 the geometry its S captures see, not from all the points triangulated with the candidates' images. (Asking for two
 seed observations keeps almost nothing: sequential matching links only neighbouring images, and farthest-point seeds
-are far apart: 10 of bonsai's 35,102 points.) `seed_points="all"` keeps every point instead, as train.py's Setup 1 initialises from the whole SfM
-model: a diagnosis (what the Fisher does when the model already holds Gaussians where no capture looked), not a
-capture a user could make.
+are far apart: 10 of bonsai's 35,102 points.) `seed_points="all"` keeps every point instead, as train.py's Setup 1
+initialises from the whole SfM model: a diagnosis (what the Fisher does when the model already holds Gaussians where
+no capture looked), not a capture a user could make.
 """
 from __future__ import annotations
 

@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import argparse
 
-from experiments.recommend_train_loop import SEED_STARTS, run_recommend_then_train
+from active.schedule import SEED_STARTS
+from experiments.recommend_train_loop import run_recommend_then_train
 from experiments.seed_dataset import SEED_POINTS
 from utils.errors import run_cli
 

@@ -2,7 +2,6 @@
 check of its Fisher pass."""
 from __future__ import annotations
 
-import random
 from dataclasses import replace
 from typing import Any
 
@@ -12,7 +11,7 @@ from active import Selector, acquisition
 from active.memory_budget import (NO_FISHER_PASS, FisherWork, block_size, device_available_bytes, fit_fisher_memory,
                                   largest_count, largest_pixels, pass_label, selection_work, smaller_passes,
                                   usable_bytes)
-from active.schedule import farthest_point_views
+from active.schedule import farthest_point_views, first_seed_index
 from arguments import FisherSettings
 from gaussian_renderer import RasterSettings
 from gaussian_renderer.fisher_partials import RAW_PARAMETER_GROUPS
@@ -52,7 +51,7 @@ def seed_views(scene: Scene, cfg: TrainConfig) -> list[int]:
                             "seed from views that can be captured")
         return list(a.init_views)
     centers = torch.stack([scene.train_cameras[v].camera_center.cpu() for v in allowed])
-    start = random.Random(cfg.run.seed).randrange(len(allowed)) if a.seed_start == "random" else 0
+    start = first_seed_index(a.seed_start, cfg.run.seed, len(allowed))
     return [allowed[i] for i in farthest_point_views(centers, a.num_init_views, start)]
 
 

@@ -5,7 +5,8 @@ from recommender.advice import FEW_VIEWS, selection_advice
 
 def test_geometric_selectors_say_their_picks_are_geometric():
     for name in ("cover_pool", "cover", "coverage"):
-        assert "geometric" in selection_advice(build_selector(name), 5)
+        note = selection_advice(build_selector(name), 5)
+        assert "geometric" in note and "not above camera-centre coverage" in note
 
 
 def test_random_gets_no_note():
@@ -15,5 +16,5 @@ def test_random_gets_no_note():
 def test_fisher_selectors_are_warned_only_from_few_views():
     for name in ("pop_gs", "lite_gs", "lazy_pop", "render_variance", "novel_pop"):
         note = selection_advice(build_selector(name), 5)
-        assert note.startswith("note: 5 captured views") and "--method cover_pool " in note
+        assert note.startswith("note: 5 captured views") and "--method coverage " in note
         assert selection_advice(build_selector(name), FEW_VIEWS + 1) is None

@@ -9,6 +9,7 @@ import pytest
 
 from active import build_selector
 from active.base import StepChoice
+from active.selectors.auto import GEOMETRIC_EVIDENCE
 from recommender.candidates import generate
 from recommender.pipeline import load_model, make_pool, recommend
 from tests.conftest import run_cli
@@ -30,6 +31,7 @@ def test_rule_chooses_by_captured_views_and_training_length(captured, iterations
     assert choice.selector.name == expected
     assert line.startswith(f"auto: {captured} captured views") and "\n" not in line
     assert ("geometric" in line) == (expected == "cover_pool")
+    assert (GEOMETRIC_EVIDENCE in line) == (expected == "cover_pool")  # the geometric branch says what it measured
 
 
 def test_options_reach_the_rule_and_the_fisher_branch():

@@ -39,6 +39,7 @@ SOURCES = [
     ("setup1_paper_stages_bonsai_1206", "Setup 1, paper stage lengths, SfM of 12-06"),
     ("setup1_paper_stages_builtin", "Setup 1, paper stage lengths"),
     ("setup1_default_scale_epyc", "Setup 1, EPYC"),
+    ("setup1_default_scale_rstart", "Setup 1, seed views by seed, EPYC"),
     ("setup1_bonsai_3seeds", "Setup 1"),
     ("setup1_bonsai_1206", "Setup 1, SfM of 12-06"),
     ("setup1_bonsai_1206_cover_pool", "Setup 1, SfM of 12-06"),

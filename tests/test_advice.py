@@ -6,7 +6,7 @@ from recommender.advice import FEW_VIEWS, selection_advice
 def test_geometric_selectors_say_their_picks_are_geometric():
     for name in ("cover_pool", "cover", "coverage"):
         note = selection_advice(build_selector(name), 5)
-        assert "geometric" in note and "not above camera-centre coverage" in note
+        assert "geometric" in note and "level with camera-centre coverage" in note
 
 
 def test_random_gets_no_note():

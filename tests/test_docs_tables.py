@@ -183,6 +183,23 @@ def test_recommend_tables_change_when_a_result_changes(tmp_path):
     assert changed["rtt_compare_rstart"] == committed["rtt_compare_rstart"]
 
 
+def test_recommend_tables_refuse_an_unfinished_run(tmp_path):
+    """A results.json caught mid-run (a method's row without its test PSNR, or absent for a seed) is one error naming
+    the folder and the runs, not a table with a hole."""
+    import json
+    from scripts import recommend_tables
+    from utils.errors import UserError
+    folder = tmp_path / "rtt_bonsai"
+    shutil.copytree(os.path.join(ROOT, "docs", "results", "rtt_bonsai"), folder)
+    results = json.loads((folder / "results.json").read_text())
+    del results["coverage/seed1"]["test_psnr"]
+    del results["random/seed2"]
+    (folder / "results.json").write_text(json.dumps(results))
+    with pytest.raises(UserError, match=r"rtt_bonsai/results.json has no finished run for coverage/seed1, "
+                                        r"random/seed2"):
+        recommend_tables.scene_results(tmp_path, "rtt_bonsai")
+
+
 def test_modes_table_rows_and_ratio_to_pop_gs(tmp_path):
     """The cached-vs-streaming table: one row per recommendations.json, ordered by mode then selector, each total
     over pop_gs's in the same mode."""

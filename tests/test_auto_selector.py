@@ -14,6 +14,7 @@ from recommender.candidates import generate
 from recommender.pipeline import load_model, make_pool, recommend
 from tests.conftest import run_cli
 from training.acquisition import model_iterations
+from utils.errors import UserError
 from tests.test_recommend import EYES, _cameras_json, _cli_error, _graphdeco_ply
 
 
@@ -50,7 +51,8 @@ def test_options_reach_the_rule_and_the_fisher_branch():
 
 
 @pytest.mark.auto_backend
-@pytest.mark.parametrize("options, branch", [({}, "cover_pool"), ({"auto_min_views": 3}, "lite_gs")])
+@pytest.mark.parametrize("options, branch", [({}, "cover_pool"), ({"auto_min_views": 3}, "lite_gs"),
+                                             ({"auto_geometric": "coverage"}, "coverage")])
 def test_recommend_makes_the_chosen_selectors_picks_and_says_why(tmp_path, options, branch):
     ply = tmp_path / "splat.ply"
     _graphdeco_ply(ply)
@@ -62,7 +64,20 @@ def test_recommend_makes_the_chosen_selectors_picks_and_says_why(tmp_path, optio
     assert rec.acquisition.evaluated == ref.acquisition.evaluated
     assert rec.acquisition.selection.conservative == ref.acquisition.selection.conservative
     assert rec.rule in rec.notes and ref.rule is None
-    assert ("geometric" in rec.rule) == (branch == "cover_pool")
+    assert ("geometric" in rec.rule) == (branch != "lite_gs")
+
+
+def test_geometric_branch_option_and_the_count_of_either_branch():
+    """--auto_geometric coverage: coverage's picks on the geometric steps, lite_gs's after; the conservative count is
+    the larger branch's worst case (the step's branch is not known before it runs)."""
+    auto = build_selector("auto", auto_geometric="coverage")
+    assert auto.for_step(5, 1000).selector.name == "coverage" and "geometric (coverage)" in auto.for_step(5, 1000).rule
+    assert auto.for_step(8, 1500).selector.name == "lite_gs"
+    lite_gs = build_selector("lite_gs", eps=0.1).conservative_count(100, 4)
+    assert auto.conservative_count(100, 4) == lite_gs > 0  # coverage evaluates no oracle
+    assert build_selector("auto").conservative_count(100, 4) == build_selector("cover_pool").conservative_count(100, 4)
+    with pytest.raises(UserError, match="--pool_compare applies to cover_pool's steps"):
+        build_selector("auto", auto_geometric="coverage", pool_compare="coverage")
 
 
 @pytest.mark.parametrize("stage_reset, expected", [(False, 700), (True, 500)])
@@ -118,6 +133,7 @@ def test_the_pool_compare_note_reaches_selection_json_and_recommendations(tiny_s
     ("--auto_min_iters_per_view", "-1", "--auto_min_iters_per_view must be an integer >= 0, got -1"),
     ("--eps", "1.5", "eps"),
     ("--pool_compare", "fps", "--pool_compare must be one of none, coverage, got 'fps'"),
+    ("--auto_geometric", "cover", "--auto_geometric must be one of cover_pool, coverage, got 'cover'"),
 ])
 def test_out_of_range_options_are_one_error_line(tmp_path, flag, value, expected):
     ply = tmp_path / "splat.ply"

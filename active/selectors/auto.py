@@ -25,11 +25,13 @@ from active.base import Selection, SelectionContext, Selector, StepChoice, check
 from active.registry import register_selector
 from active.selectors.cover_pool import (POOL_COMPARE_HELP, CoverPoolConfig, CoverPoolSelector,
                                         check_pool_compare)
+from active.selectors.coverage import CoverageSelector
 from active.selectors.lite_gs import LiteGSConfig, LiteGSSelector
 from utils.errors import UserError
 
 DEFAULT_MIN_VIEWS = 8
 DEFAULT_MIN_ITERS_PER_VIEW = 100
+GEOMETRIC_SELECTORS = ("cover_pool", "coverage")
 # What the geometric branch's picks measured from few views (docs/recommend.md, "Seed views drawn per seed")
 GEOMETRIC_EVIDENCE = ("from 5 captured views with seed views drawn per seed (recommend-then-train) cover_pool's picks "
                       "measured above random and level with camera-centre coverage on average (lego -0.27, mic -0.03, "
@@ -48,6 +50,10 @@ class AutoConfig:
     eps: float = field(default=0.1, metadata={"help": "accuracy parameter in (0, 1): guarantee 1 - exp(-(1 - eps)), "
                                                       "about M ln(1/eps) oracles per step"})
     pool_compare: str = field(default="none", metadata={"help": POOL_COMPARE_HELP})
+    auto_geometric: str = field(default="cover_pool", metadata={
+        "help": "auto: the selector of the geometric steps, cover_pool (default) or coverage (camera centres, "
+                "farthest point; level with cover_pool from 5 views with drawn seed views, not yet measured in "
+                "Setup 1)"})
 
     def __post_init__(self) -> None:
         if not isinstance(self.auto_min_views, int) or self.auto_min_views < 1:
@@ -56,6 +62,12 @@ class AutoConfig:
             raise UserError(f"--auto_min_iters_per_view must be an integer >= 0, got {self.auto_min_iters_per_view!r}")
         check_eps(self.eps)
         check_pool_compare(self.pool_compare)
+        if self.auto_geometric not in GEOMETRIC_SELECTORS:
+            raise UserError(f"--auto_geometric must be one of {', '.join(GEOMETRIC_SELECTORS)}, got "
+                            f"{self.auto_geometric!r}")
+        if self.auto_geometric == "coverage" and self.pool_compare != "none":
+            raise UserError("--pool_compare applies to cover_pool's steps; with --auto_geometric coverage leave it "
+                            "at none")
 
 
 @register_selector("auto", config=AutoConfig)
@@ -67,7 +79,8 @@ class AutoSelector(Selector):
 
     def __init__(self, config: AutoConfig | None = None):
         self.config = config if config is not None else AutoConfig()
-        self.geometric = CoverPoolSelector(CoverPoolConfig(pool_compare=self.config.pool_compare))
+        self.geometric = (CoverageSelector() if self.config.auto_geometric == "coverage"
+                          else CoverPoolSelector(CoverPoolConfig(pool_compare=self.config.pool_compare)))
         self.fisher = LiteGSSelector(LiteGSConfig(eps=self.config.eps))
 
     def uses_fisher(self, num_captured: int, iterations: int | None) -> bool:
@@ -87,12 +100,13 @@ class AutoSelector(Selector):
                                            f"0.8 dB above it on mic with seed views drawn per seed)")
         compared = ", compared with coverage's" if c.pool_compare == "coverage" else ""
         return StepChoice(self.geometric, f"auto: {num_captured} captured views, {trained}: at this stage of training "
-                                          f"the picks are geometric (cover_pool{compared}); the Fisher (lite_gs) from "
-                                          f"{c.auto_min_views} views trained {c.auto_min_iters_per_view} iterations "
-                                          f"each; {GEOMETRIC_EVIDENCE}")
+                                          f"the picks are geometric ({c.auto_geometric}{compared}); the Fisher "
+                                          f"(lite_gs) from {c.auto_min_views} views trained "
+                                          f"{c.auto_min_iters_per_view} iterations each; {GEOMETRIC_EVIDENCE}")
 
     def conservative_count(self, m: int, k: int) -> int:
-        return self.geometric.conservative_count(m, k)  # the larger of the two branches' (cover_pool's worst case)
+        """The larger of the two branches' worst cases (the step's branch is not known before it runs)."""
+        return max(self.geometric.conservative_count(m, k), self.fisher.conservative_count(m, k))
 
     def select(self, ctx: SelectionContext, k: int) -> Selection:
         raise RuntimeError("auto chooses a selector per step: call for_step(num_captured, iterations) and run its "

@@ -2,10 +2,11 @@
 
 The evidence is recommend-then-train (docs/recommend.md): 5 captured views trained 1,000 iterations, 4 picks from
 the unused poses, then training continued, on the official lego and mic and Mip-NeRF 360 bonsai. With seed views
-drawn per seed (the protocol in which a deterministic selector's seeds are different view sets) camera-centre
-coverage was the best of auto (cover_pool's picks), coverage and random; with one fixed seed-view set per scene
-cover_pool had led it, and pop_gs's Fisher picks were last on lego and bonsai and 7.7 dB below coverage in the
-closed capture loop. `auto` states its own evidence in its rule line (active.selectors.auto), so it gets no note here.
+drawn per seed (the protocol in which a deterministic selector's seeds are different view sets) auto's geometric
+picks (cover_pool's) were above random everywhere and level with camera-centre coverage on average, below it on lego
+and above it on one bonsai reconstruction; with one fixed seed-view set per scene cover_pool had led coverage, and
+pop_gs's Fisher picks were last on lego and bonsai and 7.7 dB below coverage in the closed capture loop. `auto`
+states its own evidence in its rule line (active.selectors.auto), so it gets no note here.
 """
 from __future__ import annotations
 

@@ -91,14 +91,14 @@ def generated_blocks(results_dir: Path = ROOT / "docs" / "results") -> dict[str,
     """Block name -> its text: one per scene folder, the comparisons across the design scenes and across the
     held-out ones (the default's own checks in none), and (where its folder is there) the cached-vs-streaming
     table."""
-    blocks = {}
-    for scenes, compare in ((SCENES, COMPARE), (HELDOUT, COMPARE_HELDOUT), (DRAWN, COMPARE_DRAWN),
-                            (HELDOUT_DRAWN, COMPARE_HELDOUT_DRAWN), (DRAWN_WITH_COVER, COMPARE_DRAWN_COVER)):
-        results = {scene: scene_results(results_dir, folder) for scene, folder in scenes}
-        blocks.update({folder: scene_summary(results[scene]) for scene, folder in scenes})
-        blocks[compare] = compare_table(results)
-    for _, folder in DEFAULT_CHECKS:
-        blocks[folder] = scene_summary(scene_results(results_dir, folder))
+    groups = ((SCENES, COMPARE), (HELDOUT, COMPARE_HELDOUT), (DRAWN, COMPARE_DRAWN),
+              (HELDOUT_DRAWN, COMPARE_HELDOUT_DRAWN), (DRAWN_WITH_COVER, COMPARE_DRAWN_COVER))
+    folders = dict.fromkeys([folder for scenes, _ in groups for _, folder in scenes]
+                            + [folder for _, folder in DEFAULT_CHECKS])
+    loaded = {folder: scene_results(results_dir, folder) for folder in folders}  # each folder read once
+    blocks = {folder: scene_summary(results) for folder, results in loaded.items()}
+    for scenes, compare in groups:
+        blocks[compare] = compare_table({scene: loaded[folder] for scene, folder in scenes})
     if (results_dir / MODES).is_dir():
         blocks[MODES] = modes_table(results_dir / MODES)
     return blocks

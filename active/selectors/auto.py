@@ -99,10 +99,11 @@ class AutoSelector(Selector):
                                            f"on 7 of 8 scenes and 0.3 dB below it on mic with fixed seed views; "
                                            f"0.8 dB above it on mic with seed views drawn per seed)")
         compared = ", compared with coverage's" if c.pool_compare == "coverage" else ""
+        evidence = f"; {GEOMETRIC_EVIDENCE}" if c.auto_geometric == "cover_pool" else ""
         return StepChoice(self.geometric, f"auto: {num_captured} captured views, {trained}: at this stage of training "
                                           f"the picks are geometric ({c.auto_geometric}{compared}); the Fisher "
                                           f"(lite_gs) from {c.auto_min_views} views trained "
-                                          f"{c.auto_min_iters_per_view} iterations each; {GEOMETRIC_EVIDENCE}")
+                                          f"{c.auto_min_iters_per_view} iterations each{evidence}")
 
     def conservative_count(self, m: int, k: int) -> int:
         """The larger of the two branches' worst cases (the step's branch is not known before it runs)."""

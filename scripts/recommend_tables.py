@@ -38,6 +38,11 @@ DEFAULT_CHECKS = (("clutter 4", "rtt_clutter4"),)
 COMPARE, COMPARE_HELDOUT = "rtt_compare", "rtt_compare_heldout"
 COMPARE_DRAWN, COMPARE_HELDOUT_DRAWN = "rtt_compare_rstart", "rtt_compare_rstart_heldout"
 COMPARE_DRAWN_COVER = "rtt_compare_rstart_cover"
+# Each comparison block with the scene tables it compares, and every folder that gets a table of its own
+GROUPS = ((SCENES, COMPARE), (HELDOUT, COMPARE_HELDOUT), (DRAWN, COMPARE_DRAWN),
+          (HELDOUT_DRAWN, COMPARE_HELDOUT_DRAWN), (DRAWN_WITH_COVER, COMPARE_DRAWN_COVER))
+FOLDERS = tuple(dict.fromkeys([folder for scenes, _ in GROUPS for _, folder in scenes]
+                              + [folder for _, folder in DEFAULT_CHECKS]))
 BLOCK = re.compile(r"(<!-- generated: (\S+) -->\n)(.*?)(<!-- end generated -->)", re.S)
 BASELINES = ("coverage", "cover", "random")  # the first rows of every table, then the others in the order they ran
 MODES = "recommend_modes"  # folder of recommendations.json files, MODE_SELECTOR.json: the cached-vs-streaming table
@@ -91,13 +96,9 @@ def generated_blocks(results_dir: Path = ROOT / "docs" / "results") -> dict[str,
     """Block name -> its text: one per scene folder, the comparisons across the design scenes and across the
     held-out ones (the default's own checks in none), and (where its folder is there) the cached-vs-streaming
     table."""
-    groups = ((SCENES, COMPARE), (HELDOUT, COMPARE_HELDOUT), (DRAWN, COMPARE_DRAWN),
-              (HELDOUT_DRAWN, COMPARE_HELDOUT_DRAWN), (DRAWN_WITH_COVER, COMPARE_DRAWN_COVER))
-    folders = dict.fromkeys([folder for scenes, _ in groups for _, folder in scenes]
-                            + [folder for _, folder in DEFAULT_CHECKS])
-    loaded = {folder: scene_results(results_dir, folder) for folder in folders}  # each folder read once
+    loaded = {folder: scene_results(results_dir, folder) for folder in FOLDERS}  # each folder read once
     blocks = {folder: scene_summary(results) for folder, results in loaded.items()}
-    for scenes, compare in groups:
+    for scenes, compare in GROUPS:
         blocks[compare] = compare_table({scene: loaded[folder] for scene, folder in scenes})
     if (results_dir / MODES).is_dir():
         blocks[MODES] = modes_table(results_dir / MODES)
@@ -123,10 +124,9 @@ def main(argv: list[str] | None = None) -> int:
     new = splice(doc, blocks)
     if args.write:
         DOC.write_text(new)
-        folders = [folder for _, folder in SCENES + HELDOUT + DRAWN + HELDOUT_DRAWN + DEFAULT_CHECKS]
-        for folder in folders:
+        for folder in FOLDERS:
             (ROOT / "docs" / "results" / folder / "summary.md").write_text(blocks[folder])
-        print(f"wrote {DOC.relative_to(ROOT)} and {len(folders)} summary.md files")
+        print(f"wrote {DOC.relative_to(ROOT)} and {len(FOLDERS)} summary.md files")
         return 0
     if new != doc:
         print("docs/recommend.md's recommend-then-train tables are stale: run python scripts/recommend_tables.py "

@@ -167,8 +167,7 @@ def test_recommend_tables_change_when_a_result_changes(tmp_path):
     import json
     from scripts import recommend_tables
     src = os.path.join(ROOT, "docs", "results")
-    for _, folder in (recommend_tables.SCENES + recommend_tables.HELDOUT + recommend_tables.DRAWN
-                      + recommend_tables.HELDOUT_DRAWN + recommend_tables.DEFAULT_CHECKS):
+    for folder in recommend_tables.FOLDERS:
         shutil.copytree(os.path.join(src, folder), tmp_path / folder)
     path = tmp_path / "rtt_bonsai" / "results.json"
     results = json.loads(path.read_text())

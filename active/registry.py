@@ -62,6 +62,28 @@ def build_selector_from(name: str, values: Mapping[str, Any]) -> Selector:
     return build_selector(name, **{option: values[option] for option in selector_options(name) if option in values})
 
 
+def check_selector_options(values: Mapping[str, Any], names: list[str]) -> list[str]:
+    """Validate every selector option in `values` by the config of each selector that declares it, so a bad value
+    is a `UserError` whichever selector runs; return the options set away from their default that none of `names`
+    reads (sorted), for a one-line note."""
+    defaults: dict[str, Any] = {}
+    for _, config in _SELECTORS.values():
+        if config is None:
+            continue
+        fields = [f for f in dataclasses.fields(config) if f.name in values]
+        config(**{f.name: values[f.name] for f in fields})  # its __post_init__ raises the one-line UserError
+        defaults.update((f.name, list(f.default) if isinstance(f.default, tuple) else f.default) for f in fields)
+    read = {option for name in names for option in selector_options(name)}
+    return sorted(o for o, default in defaults.items() if o not in read and values[o] != default)
+
+
+def unread_options_note(unread: list[str], runs: str) -> str:
+    """One line naming the options in `unread` that `runs` (e.g. "--method lazy_pop") ignores, and who reads each."""
+    users = {o: [n for n, (_, c) in sorted(_SELECTORS.items())
+                 if c is not None and o in {f.name for f in dataclasses.fields(c)}] for o in unread}
+    return "note: ignored by " + runs + ": " + "; ".join(f"--{o} (read by {', '.join(users[o])})" for o in unread)
+
+
 def selector_options_dataclass() -> type:
     """A frozen dataclass with one field per option name over all registered selectors (for `add_config_args`);
     each field's help names the selectors that use it."""

@@ -42,7 +42,7 @@ def check_flags(cfg: GridConfig, specs: list[JobSpec]) -> None:
         saved = read_json(Path(spec.model_dir) / CFG_ARGS, missing="none", damaged="none")
         if saved is None:
             continue  # unreadable: train.py itself reports it
-        expected = parse_config([*spec.train_args, "--device", "cpu"]).to_dict()
+        expected = parse_config([*spec.train_args, "--device", "cpu"], notes=False).to_dict()
         for group, values in expected.items():
             for name, value in values.items():
                 if name in NOT_COMPARED or (name in any_selector_option

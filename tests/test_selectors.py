@@ -178,6 +178,32 @@ def test_registry_refuses_duplicates_unknown_names_and_options():
         registry._SELECTORS.pop("_test_dummy", None)
 
 
+def test_every_selector_option_is_validated_and_unread_ones_are_noted(capsys):
+    """train.py's flags: a bad value of any selector's option is one error line whichever --method runs (lazy_pop
+    reads no --pool_compare, yet `foo` is refused), and options set away from their default that the run's selectors
+    do not read are named in one note line with who reads them; defaults and read options are not."""
+    from training.config import parse_config
+    with pytest.raises(UserError, match="--pool_compare must be one of none, coverage"):
+        parse_config(["-s", "x", "--method", "lazy_pop", "--pool_compare", "foo"])
+    with pytest.raises(UserError, match="--eps must lie in"):
+        parse_config(["-s", "x", "--method", "random", "--eps", "0"])
+    capsys.readouterr()
+    parse_config(["-s", "x", "--method", "lazy_pop", "--pool_compare", "coverage", "--eps", "0.3"])
+    assert capsys.readouterr().out.strip() == ("note: ignored by --method lazy_pop: --eps (read by auto, lite_gs, "
+                                               "ssg); --pool_compare (read by auto, cover_pool)")
+    for argv in (["--method", "lazy_pop", "--eps", "0.1"],  # the default
+                 ["--method", "auto", "--eps", "0.3", "--pool_compare", "coverage"],  # both read by auto
+                 ["--method", "lite_gs", "--stage_method", "0:cover_pool", "--pool_weight", "pixels"]):
+        parse_config(["-s", "x", *argv])
+        assert capsys.readouterr().out == "", argv
+    parse_config(["-s", "x", "--method", "lazy_pop", "--eps", "0.3"], notes=False)
+    assert capsys.readouterr().out == ""
+    assert registry.check_selector_options({"eps": 0.3, "coverage_space": "directions"}, ["lite_gs"]) == [
+        "coverage_space"]
+    with pytest.raises(UserError, match="coverage_space"):
+        registry.check_selector_options({"coverage_space": "sphere"}, ["lite_gs"])
+
+
 @pytest.mark.parametrize("method,options", [("pop_gs", {}), ("lazy_pop", {}), ("lite_gs", {"eps": 0.1}),
                                             ("ssg", {"eps": 0.1})])
 def test_streaming_commits_cost_no_fisher_recompute(method, options):

@@ -9,7 +9,7 @@ from typing import Any
 import torch
 
 from active import Selector, build_selector_from, list_selectors
-from active.registry import selector_options_dataclass
+from active.registry import check_selector_options, selector_options_dataclass, unread_options_note
 from arguments import ActiveConfig, ModelConfig, PipelineConfig, RunConfig, add_config_args, config_from_args, config_to_dict
 from scene.trained import raster_settings
 from training.densify import DensifyConfig
@@ -57,16 +57,18 @@ def build_parser(description: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-def parse_config(argv: list[str] | None = None, description: str | None = None) -> TrainConfig:
-    """The validated config of train.py's flags `argv` (default: sys.argv[1:])."""
+def parse_config(argv: list[str] | None = None, description: str | None = None, notes: bool = True) -> TrainConfig:
+    """The validated config of train.py's flags `argv` (default: sys.argv[1:]); `notes` prints the one-line notes
+    on flags the run ignores."""
     ns = build_parser(description).parse_args(argv)
     cfg = TrainConfig(**{name: config_from_args(cls, ns) for name, cls, _ in CONFIG_GROUPS})
-    validate_config(cfg)
+    validate_config(cfg, notes)
     return cfg
 
 
-def validate_config(cfg: TrainConfig) -> None:
-    """Reject bad flag values with one clear line each (the selector's own options by its config)."""
+def validate_config(cfg: TrainConfig, notes: bool = True) -> None:
+    """Reject bad flag values with one clear line each (every selector option by the config that declares it), and
+    with `notes` print one line naming the selector options set that the run's selectors do not read."""
     if not cfg.model.source_path:
         raise UserError("no dataset given: pass -s/--source_path DIR (e.g. data/builtin, made by `python -m scene.builtin data/builtin`)")
     if cfg.run.iterations <= 0:
@@ -81,8 +83,11 @@ def validate_config(cfg: TrainConfig) -> None:
         raise UserError("--stage_method replaces --method at some acquisitions: pass --method too (the selector of "
                         "the others)")
     if a.method:
-        make_selector(cfg)
-        stage_selectors(cfg)
+        names = [make_selector(cfg).name, *(selector.name for selector in stage_selectors(cfg).values())]
+        unread = check_selector_options(config_to_dict(cfg.selector), names)
+        if unread and notes:
+            runs = f"--method {a.method}" + (" and --stage_method" if a.stage_method else "")
+            print(unread_options_note(unread, runs))
         if a.sigma <= 0:
             raise UserError(f"--sigma must be positive, got {a.sigma}")
 

@@ -52,8 +52,8 @@ class AutoConfig:
     pool_compare: str = field(default="none", metadata={"help": POOL_COMPARE_HELP})
     auto_geometric: str = field(default="cover_pool", metadata={
         "help": "auto: the selector of the geometric steps, cover_pool (default) or coverage (camera centres, "
-                "farthest point: level with cover_pool from 5 views with drawn seed views, 0.36 dB below it in "
-                "Setup 1 on lego)"})
+                "farthest point: level with cover_pool from 5 views with drawn seed views; in Setup 1 0.36 dB below "
+                "it on lego and 0.64 on mic)"})
 
     def __post_init__(self) -> None:
         if not isinstance(self.auto_min_views, int) or self.auto_min_views < 1:

@@ -21,7 +21,7 @@ import torch
 
 from active import build_selector_from, list_selectors
 from active.fisher import FISHER_PARAM_GROUPS
-from active.registry import check_selector_options, selector_options_dataclass, unread_options_note
+from active.registry import selector_options_dataclass, unread_options_note
 from arguments import add_config_args, config_from_args, config_to_dict
 from recommender.outputs import check_output_dir, summary_lines, write_outputs
 from recommender.pipeline import Recommendation, candidate_cameras, fit_memory, load_model, make_pool, recommend
@@ -86,9 +86,9 @@ def main() -> None:
         raise UserError(f"--width must be at least 16 px, got {args.width}")
     options = config_to_dict(config_from_args(SelectorOptions, args))
     selector = build_selector_from(args.method, options)
-    unread = check_selector_options(options, [args.method])
-    if unread:
-        print(unread_options_note(unread, f"--method {args.method}"))
+    note = unread_options_note(options, [args.method], f"--method {args.method}")  # validates every option's value
+    if note:
+        print(note)
     model_path = Path(args.model)
     out = check_output_dir(args.output or (model_path / "recommend" if model_path.is_dir()
                                            else model_path.with_name(model_path.stem + "_recommend")))

@@ -77,11 +77,14 @@ def check_selector_options(values: Mapping[str, Any], names: list[str]) -> list[
     return sorted(o for o, default in defaults.items() if o not in read and values[o] != default)
 
 
-def unread_options_note(unread: list[str], runs: str) -> str:
-    """One line naming the options in `unread` that `runs` (e.g. "--method lazy_pop") ignores, and who reads each."""
-    users = {o: [n for n, (_, c) in sorted(_SELECTORS.items())
-                 if c is not None and o in {f.name for f in dataclasses.fields(c)}] for o in unread}
-    return "note: ignored by " + runs + ": " + "; ".join(f"--{o} (read by {', '.join(users[o])})" for o in unread)
+def unread_options_note(values: Mapping[str, Any], names: list[str], runs: str) -> str | None:
+    """`check_selector_options(values, names)`, then one line naming the unread options that `runs` (e.g. "--method
+    lazy_pop") ignores and who reads each; None when every option set is read."""
+    unread = check_selector_options(values, names)
+    if not unread:
+        return None
+    readers = {o: [name for name in list_selectors() if o in selector_options(name)] for o in unread}
+    return "note: ignored by " + runs + ": " + "; ".join(f"--{o} (read by {', '.join(readers[o])})" for o in unread)
 
 
 def selector_options_dataclass() -> type:

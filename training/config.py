@@ -9,7 +9,7 @@ from typing import Any
 import torch
 
 from active import Selector, build_selector_from, list_selectors
-from active.registry import check_selector_options, selector_options_dataclass, unread_options_note
+from active.registry import selector_options_dataclass, unread_options_note
 from arguments import ActiveConfig, ModelConfig, PipelineConfig, RunConfig, add_config_args, config_from_args, config_to_dict
 from scene.trained import raster_settings
 from training.densify import DensifyConfig
@@ -84,10 +84,10 @@ def validate_config(cfg: TrainConfig, notes: bool = True) -> None:
                         "the others)")
     if a.method:
         names = [make_selector(cfg).name, *(selector.name for selector in stage_selectors(cfg).values())]
-        unread = check_selector_options(config_to_dict(cfg.selector), names)
-        if unread and notes:
-            runs = f"--method {a.method}" + (" and --stage_method" if a.stage_method else "")
-            print(unread_options_note(unread, runs))
+        runs = f"--method {a.method}" + (" and --stage_method" if a.stage_method else "")
+        note = unread_options_note(config_to_dict(cfg.selector), names, runs)  # validates every option's value
+        if note and notes:
+            print(note)
         if a.sigma <= 0:
             raise UserError(f"--sigma must be positive, got {a.sigma}")
 

@@ -80,6 +80,17 @@ def test_geometric_branch_option_and_the_count_of_either_branch():
         build_selector("auto", auto_geometric="coverage", pool_compare="coverage")
 
 
+def test_coverage_from_a_number_of_captured_views():
+    """--auto_coverage_from 5: cover_pool's picks below 5 captured views, coverage's from 5 until the Fisher's."""
+    auto = build_selector("auto", auto_coverage_from=5)
+    steps = {n: auto.for_step(n, 100 * n) for n in (2, 4, 5, 7, 8)}
+    assert [steps[n].selector.name for n in steps] == ["cover_pool", "cover_pool", "coverage", "coverage", "lite_gs"]
+    assert "geometric (coverage, coverage's from 5 captured views)" in steps[5].rule
+    assert "geometric (cover_pool, coverage's from 5 captured views)" in steps[2].rule
+    assert build_selector("auto").for_step(7, 700).selector.name == "cover_pool"  # 0, the default: never
+    assert auto.conservative_count(100, 4) == build_selector("auto").conservative_count(100, 4)
+
+
 @pytest.mark.parametrize("stage_reset, expected", [(False, 700), (True, 500)])
 def test_the_rule_counts_the_iterations_of_the_current_model(stage_reset, expected):
     """With --stage_reset the model starts afresh at each acquisition: only the iterations since the last one count."""
@@ -134,6 +145,7 @@ def test_the_pool_compare_note_reaches_selection_json_and_recommendations(tiny_s
     ("--eps", "1.5", "eps"),
     ("--pool_compare", "fps", "--pool_compare must be one of none, coverage, got 'fps'"),
     ("--auto_geometric", "cover", "--auto_geometric must be one of cover_pool, coverage, got 'cover'"),
+    ("--auto_coverage_from", "-2", "--auto_coverage_from must be an integer >= 0 (0: never), got -2"),
 ])
 def test_out_of_range_options_are_one_error_line(tmp_path, flag, value, expected):
     ply = tmp_path / "splat.ply"

@@ -54,6 +54,9 @@ class AutoConfig:
         "help": "auto: the selector of the geometric steps, cover_pool (default) or coverage (camera centres, "
                 "farthest point: level with cover_pool from 5 views with drawn seed views; in Setup 1 0.36 dB below "
                 "it on lego and 0.64 on mic)"})
+    auto_coverage_from: int = field(default=0, metadata={
+        "help": "auto: geometric steps with at least this many captured views take coverage's picks (camera centres, "
+                "farthest point), fewer take --auto_geometric's; an integer >= 0, 0 (default): never"})
 
     def __post_init__(self) -> None:
         if not isinstance(self.auto_min_views, int) or self.auto_min_views < 1:
@@ -65,6 +68,8 @@ class AutoConfig:
         if self.auto_geometric not in GEOMETRIC_SELECTORS:
             raise UserError(f"--auto_geometric must be one of {', '.join(GEOMETRIC_SELECTORS)}, got "
                             f"{self.auto_geometric!r}")
+        if not isinstance(self.auto_coverage_from, int) or self.auto_coverage_from < 0:
+            raise UserError(f"--auto_coverage_from must be an integer >= 0 (0: never), got {self.auto_coverage_from!r}")
         if self.auto_geometric == "coverage" and self.pool_compare != "none":
             raise UserError("--pool_compare applies to cover_pool's steps; with --auto_geometric coverage leave it "
                             "at none")
@@ -79,7 +84,8 @@ class AutoSelector(Selector):
 
     def __init__(self, config: AutoConfig | None = None):
         self.config = config if config is not None else AutoConfig()
-        self.geometric = (CoverageSelector() if self.config.auto_geometric == "coverage"
+        self.coverage = CoverageSelector()
+        self.geometric = (self.coverage if self.config.auto_geometric == "coverage"
                           else CoverPoolSelector(CoverPoolConfig(pool_compare=self.config.pool_compare)))
         self.fisher = LiteGSSelector(LiteGSConfig(eps=self.config.eps))
 
@@ -98,12 +104,23 @@ class AutoSelector(Selector):
                                            f"{c.auto_min_iters_per_view} iterations each (measured: above coverage "
                                            f"on 7 of 8 scenes and 0.3 dB below it on mic with fixed seed views; "
                                            f"0.8 dB above it on mic with seed views drawn per seed)")
-        compared = ", compared with coverage's" if c.pool_compare == "coverage" else ""
-        evidence = f"; {GEOMETRIC_EVIDENCE}" if c.auto_geometric == "cover_pool" else ""
-        return StepChoice(self.geometric, f"auto: {num_captured} captured views, {trained}: at this stage of training "
-                                          f"the picks are geometric ({c.auto_geometric}{compared}); the Fisher "
-                                          f"(lite_gs) from {c.auto_min_views} views trained "
-                                          f"{c.auto_min_iters_per_view} iterations each{evidence}")
+        name, selector = self.geometric_for(num_captured)
+        compared = ", compared with coverage's" if name == "cover_pool" and c.pool_compare == "coverage" else ""
+        switch = (f", coverage's from {c.auto_coverage_from} captured views"
+                  if c.auto_coverage_from and c.auto_geometric != "coverage" else "")
+        evidence = f"; {GEOMETRIC_EVIDENCE}" if name == "cover_pool" else ""
+        return StepChoice(selector, f"auto: {num_captured} captured views, {trained}: at this stage of training "
+                                    f"the picks are geometric ({name}{compared}{switch}); the Fisher "
+                                    f"(lite_gs) from {c.auto_min_views} views trained "
+                                    f"{c.auto_min_iters_per_view} iterations each{evidence}")
+
+    def geometric_for(self, num_captured: int) -> tuple[str, Selector]:
+        """The geometric step's selector: coverage from `auto_coverage_from` captured views on, --auto_geometric's
+        before."""
+        c = self.config
+        if c.auto_coverage_from and num_captured >= c.auto_coverage_from:
+            return "coverage", self.coverage
+        return c.auto_geometric, self.geometric
 
     def conservative_count(self, m: int, k: int) -> int:
         """The larger of the two branches' worst cases (the step's branch is not known before it runs)."""

@@ -59,12 +59,14 @@ def start_positions(seed_start: str, seed: int, count: int = 3) -> torch.Tensor:
     return positions @ turn.T
 
 
-def train(dataset: Path, model: Path, iterations: int, seed: int, max_gaussians: int) -> float:
-    """train.py on every captured view (from scratch); returns the test PSNR."""
+def train(dataset: Path, model: Path, iterations: int, seed: int, max_gaussians: int, num_random_points: int) -> float:
+    """train.py on every captured view (from scratch, `num_random_points` random initial points); returns the test
+    PSNR."""
     import subprocess
     root = Path(__file__).resolve().parents[1]
     cmd = [sys.executable, str(root / "train.py"), "-s", str(dataset), "-m", str(model), "--eval", "--iterations",
            str(iterations), "--seed", str(seed), "--max_gaussians", str(max_gaussians), "--quiet", "--overwrite",
+           "--num_random_points", str(num_random_points),
            "--densify_from_iter", "100", "--densification_interval", "50"]
     subprocess.run(cmd, check=True, cwd=root, capture_output=True, text=True)
     return read_json(model / model_dir.RUN_STATUS)["test_psnr"]
@@ -87,7 +89,8 @@ def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dic
         write_json(dataset / "transforms_train.json", {"camera_angle_x": CAMERA_ANGLE_X, "frames": frames})
         t0 = time.perf_counter()
         model_path = out / "model"
-        psnr = train(dataset, model_path, args.iters_per_view * len(frames), seed, args.max_gaussians)
+        psnr = train(dataset, model_path, args.iters_per_view * len(frames), seed, args.max_gaussians,
+                     args.num_random_points)
         train_s = time.perf_counter() - t0
         record = {"views": len(frames), "test_psnr": psnr, "train_seconds": train_s}
         rounds.append(record)

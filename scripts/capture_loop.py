@@ -49,6 +49,8 @@ def main() -> None:
                         "azimuth drawn with the seed (random)")
     p.add_argument("--iters_per_view", type=int, default=60, help="training iterations per captured view")
     p.add_argument("--max_gaussians", type=int, default=4000)
+    p.add_argument("--num_random_points", type=int, default=10_000,
+                   help="train.py's random initial points (default 10,000: every loop in docs/recommend.md ran with it)")
     p.add_argument("--plot", help="only rewrite the summary.md and draw the curve of an output folder")
     p.add_argument("--png", default=None, help="the plot (default: psnr_vs_views.png in the output or --plot folder)")
     args = p.parse_args()

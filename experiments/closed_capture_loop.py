@@ -5,6 +5,7 @@ PSNR-vs-views plot. Each (method, seed) writes OUT/METHOD/seedS/loop.json."""
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import math
 import random
@@ -72,8 +73,39 @@ def train(dataset: Path, model: Path, iterations: int, seed: int, max_gaussians:
     return read_json(model / model_dir.RUN_STATUS)["test_psnr"]
 
 
+# Flags that do not change a loop's result; every other flag must agree between loops resumed or tabled together
+NOT_PROTOCOL = ("methods", "seeds", "output", "plot", "png", "overwrite")
+# Flags added after loops were committed: a loop.json without one ran with this value
+ADDED_LATER = {"elevation": [0.0, 80.0], "seed_start": "first", "num_random_points": 10_000}
+
+
+def protocol(settings: dict) -> dict:
+    """The flags of a loop's `settings` that decide its result, as JSON values, flags added later filled in."""
+    chosen = ADDED_LATER | {k: v for k, v in settings.items() if k not in NOT_PROTOCOL}
+    return json.loads(json.dumps(chosen))  # tuples as lists, as loop.json holds them
+
+
+def protocol_difference(a: dict, b: dict) -> str | None:
+    """The first flag whose value differs between two loops' settings, as "--flag A against B"; None if none."""
+    pa, pb = protocol(a), protocol(b)
+    for key in sorted(pa.keys() | pb.keys()):
+        if pa.get(key) != pb.get(key):
+            return f"--{key} {pa.get(key)} against {pb.get(key)}"
+    return None
+
+
 def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dict:
-    """One closed loop; writes out/loop.json."""
+    """One closed loop; writes out/loop.json when it has finished. A finished loop of the same flags is kept (an
+    interrupted run resumes at its first unfinished loop), one of other flags is an error unless --overwrite."""
+    done = out / "loop.json"
+    if done.is_file() and not getattr(args, "overwrite", False):
+        previous = read_json(done, fix="delete it to run the loop again")
+        difference = protocol_difference(previous.get("settings", {}), vars(args))
+        if difference:
+            raise UserError(f"{done} ran with other flags ({difference}): give another -o, or --overwrite to run "
+                            "it again")
+        print(f"{method} seed {seed}: finished before, kept ({done})", flush=True)
+        return previous
     if out.exists():
         shutil.rmtree(out)
     dataset = out / "data"
@@ -115,10 +147,16 @@ def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dic
 
 def loop_results(root: Path) -> dict[str, tuple[list[int], torch.Tensor]]:
     """Per method folder of `root`: the view counts of its rounds and the test PSNR of every seed [S, R]."""
-    out = {}
+    out, first = {}, None
     for method_dir in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("builtin")):
-        runs = [read_json(p, fix="rerun scripts/capture_loop.py to write it again")
-                for p in sorted(method_dir.glob("seed*/loop.json"))]
+        paths = sorted(method_dir.glob("seed*/loop.json"))
+        runs = [read_json(p, fix="rerun scripts/capture_loop.py to write it again") for p in paths]
+        for path, run in zip(paths, runs):  # one table, one protocol
+            first = first or (path, run.get("settings", {}))
+            difference = protocol_difference(run.get("settings", {}), first[1])
+            if difference:
+                raise UserError(f"{path} and {first[0]} ran with different flags ({difference}): table them from "
+                                "separate folders")
         if runs:
             out[method_dir.name] = ([r["views"] for r in runs[0]["rounds"]],
                                     torch.tensor([[r["test_psnr"] for r in run["rounds"]] for run in runs]))

@@ -10,8 +10,8 @@ training, so each method gives a PSNR-vs-views curve.
     python scripts/capture_loop.py --elevation 10,75 ...      # candidates over the test views' elevations only
     python scripts/capture_loop.py --plot output/capture_loop --png docs/results/capture_loop/psnr_vs_views.png
 
-Each (method, seed) writes OUT/METHOD/seedS/loop.json: per round the views, test PSNR and the seconds spent
-training and recommending; OUT/summary.md tables the test PSNR per method and view count (mean +- std over seeds).
+Each (method, seed) writes OUT/METHOD/seedS/loop.json when it finishes: per round the views, test PSNR and the seconds
+spent training and recommending; run again, the command keeps the loops finished with the same flags; OUT/summary.md tables the test PSNR per method and view count (mean +- std over seeds).
 """
 from __future__ import annotations
 
@@ -51,6 +51,9 @@ def main() -> None:
     p.add_argument("--max_gaussians", type=int, default=4000)
     p.add_argument("--num_random_points", type=int, default=10_000,
                    help="train.py's random initial points (default 10,000: every loop in docs/recommend.md ran with it)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="run every loop again (default: a loop finished with the same flags is kept, so an "
+                        "interrupted run resumes; one of other flags is an error)")
     p.add_argument("--plot", help="only rewrite the summary.md and draw the curve of an output folder")
     p.add_argument("--png", default=None, help="the plot (default: psnr_vs_views.png in the output or --plot folder)")
     args = p.parse_args()

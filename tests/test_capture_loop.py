@@ -1,6 +1,7 @@
 """experiments/closed_capture_loop.py (CLI scripts/capture_loop.py): the built-in ground truth "captured" at given
 poses, and the summary and plot of an output folder (the loop itself trains with train.py:
 `test_the_cli_runs_one_round`, slow)."""
+import argparse
 import json
 import logging
 import math
@@ -8,7 +9,9 @@ import math
 import pytest
 import torch
 
-from experiments.closed_capture_loop import FirstNoteOnly, capture, run_capture_loop, start_positions, summary_table
+from experiments.closed_capture_loop import (FirstNoteOnly, capture, run_capture_loop, run_loop, start_positions,
+                                             summary_table)
+from utils.errors import UserError
 from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions
 from scene.cameras import look_at
 from scene.frames import GL_TO_CV
@@ -74,6 +77,46 @@ def test_summary_tables_mean_and_std_over_seeds(tmp_path):
     table = summary_table(tmp_path)
     assert "| method | seeds | 3 views | 5 views |" in table
     assert "| random | 2 | 21.00 ± 1.00 | 22.00 ± 1.00 |" in table
+
+
+def _loop_args(tmp_path, **changes):
+    flags = {"methods": ["coverage"], "seeds": [0], "output": str(tmp_path), "resolution": 32, "num_test": 8,
+             "budget": 9, "k": 2, "candidates": 24, "elevation": (10.0, 75.0), "seed_start": "random",
+             "iters_per_view": 40, "max_gaussians": 4000, "num_random_points": 10_000, "plot": None, "png": None,
+             "overwrite": False}
+    return argparse.Namespace(**(flags | changes))
+
+
+def test_a_finished_loop_is_kept_and_one_of_other_flags_is_an_error(tmp_path):
+    """An interrupted run resumes at its first unfinished loop: a finished loop of the same flags is not run again
+    (nothing is trained here: the folder holds only its loop.json), one of other flags is one error line."""
+    out = tmp_path / "coverage" / "seed0"
+    out.mkdir(parents=True)
+    finished = {"method": "coverage", "seed": 0, "rounds": [{"views": 3, "test_psnr": 10.0}],
+                "settings": vars(_loop_args(tmp_path, methods=["coverage", "random"], seeds=[0, 1, 2]))
+                | {"elevation": [10.0, 75.0]}}
+    (out / "loop.json").write_text(json.dumps(finished))
+    assert run_loop("coverage", 0, out, _loop_args(tmp_path)) == finished
+    assert sorted(p.name for p in out.iterdir()) == ["loop.json"]
+    with pytest.raises(UserError, match=r"ran with other flags \(--num_random_points 10000 against 3000\).*--overwrite"):
+        run_loop("coverage", 0, out, _loop_args(tmp_path, num_random_points=3000))
+
+
+def test_loops_of_other_flags_are_not_tabled_together(tmp_path):
+    for method, points in (("coverage", 10_000), ("random", 3000)):
+        folder = tmp_path / method / "seed0"
+        folder.mkdir(parents=True)
+        settings = vars(_loop_args(tmp_path, num_random_points=points)) | {"elevation": [10.0, 75.0]}
+        (folder / "loop.json").write_text(json.dumps({"rounds": [{"views": 3, "test_psnr": 10.0}],
+                                                      "settings": settings}))
+    with pytest.raises(UserError, match="random/seed0/loop.json and .*coverage/seed0/loop.json ran with different "
+                                        "flags .--num_random_points 3000 against 10000"):
+        summary_table(tmp_path)
+    old = tmp_path / "random" / "seed0" / "loop.json"  # a loop from before --num_random_points: it ran with 10,000
+    record = json.loads(old.read_text())
+    del record["settings"]["num_random_points"]
+    old.write_text(json.dumps(record))
+    assert "| random | 1 |" in summary_table(tmp_path)
 
 
 @pytest.mark.parametrize("folder", ["missing", "empty"])

@@ -133,6 +133,25 @@ def seed_model(args: argparse.Namespace, folder: Path, start: int, select_at: in
     return seed_data, base, read_json(base / model_dir.RUN_STATUS)["test_psnr"]
 
 
+# The flags that decide a run's result: every call into one results.json must agree on them (methods, seeds, threads
+# and the output folder may differ). The value is what a results.json written before the flag existed ran with,
+# or UNKNOWN (then such a results.json is not checked on that flag).
+UNKNOWN = object()
+PROTOCOL_FLAGS = {"data": UNKNOWN, "images": "images", "seed_points": UNKNOWN, "num_seed_views": UNKNOWN,
+                  "seed_start": "first", "k": UNKNOWN, "resolution": UNKNOWN, "base_iterations": UNKNOWN,
+                  "iterations": UNKNOWN, "select_iteration": None, "train_args": UNKNOWN}
+
+
+def check_same_protocol(earlier: dict, current: dict, results_path: Path) -> None:
+    """One `error:` line if the settings recorded in `results_path` (`earlier`) differ from this call's (`current`)
+    on a flag of PROTOCOL_FLAGS, so that runs of two protocols never share one table."""
+    for flag, before_it_existed in PROTOCOL_FLAGS.items():
+        old = earlier.get(flag, before_it_existed)
+        if old is not UNKNOWN and old != current.get(flag):
+            raise UserError(f"{results_path} holds runs with --{flag} {old}; use a new -o for --{flag} "
+                            f"{current.get(flag)}")
+
+
 def run_recommend_then_train(args: argparse.Namespace) -> None:
     """The whole experiment for scripts/recommend_then_train.py's parsed flags (`args`): per seed the seed-view model
     (one for all seeds in OUT/base with --seed_start first; one per seed in OUT/seedS/base with random), then per
@@ -147,9 +166,8 @@ def run_recommend_then_train(args: argparse.Namespace) -> None:
     results_path = out / "results.json"
     results = read_json(results_path, missing="none", fix="delete it to run every step again") or {}
     earlier = results.get("settings", {})
-    if results and earlier.get("seed_start", "first") != args.seed_start:
-        raise UserError(f"{results_path} holds runs with --seed_start {earlier.get('seed_start', 'first')}; use a new "
-                        f"-o for --seed_start {args.seed_start}")
+    if results:
+        check_same_protocol(earlier, vars(args), results_path)
     per_seed = {k: dict(earlier.get(k, {})) if drawn and isinstance(earlier.get(k), dict) else {}
                 for k in ("seed_views", "base_test_psnr", "seed_data")}  # drawn: seeds of earlier calls kept
     num_views = len(training_centers(data)) if drawn else 1  # only a drawn start needs the count

@@ -142,6 +142,27 @@ def test_an_output_folder_keeps_one_seed_start(tiny_scene, tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["results.json"]
 
 
+
+@pytest.mark.parametrize("flag, value, recorded", [("-k", "6", "--k 4"), ("--iterations", "900", "--iterations 1200"),
+                                                   ("--train_args=--num_random_points 10000", None,
+                                                    "--train_args --num_random_points 3000")])
+def test_an_output_folder_keeps_one_protocol(tiny_scene, tmp_path, flag, value, recorded):
+    """A later call into the same folder with another value of a flag that decides the results is one error line
+    before any training, so a table never mixes two protocols; methods and seeds may differ."""
+    out = tmp_path / "rtt"
+    out.mkdir()
+    settings = {"data": str(tiny_scene), "images": "images", "seed_points": "observed", "num_seed_views": 5,
+                "seed_start": "first", "k": 4, "resolution": "8", "base_iterations": 1000, "iterations": 1200,
+                "select_iteration": None, "methods": ["random"], "seeds": [5], "threads": 2,
+                "train_args": "--num_random_points 3000 --densify_from_iter 100 --densification_interval 50 "
+                              "--max_gaussians 20000"}
+    (out / "results.json").write_text(json.dumps({"settings": settings, "random/seed5": {"picks": [1, 2, 3, 4]}}))
+    r = run_cli(str(SCRIPT), "--data", str(tiny_scene), "-o", str(out), "--methods", "coverage", "--seeds", "0",
+                flag, *([value] if value else []))
+    assert r.returncode == 2 and r.stderr.strip().splitlines()[-1].startswith(
+        f"error: {out / 'results.json'} holds runs with {recorded}"), r.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["results.json"]
+
 @pytest.mark.slow
 def test_select_iteration_recommends_on_the_earlier_model_and_continues_from_the_last(tiny_scene, tmp_path):
     out = tmp_path / "rtt"

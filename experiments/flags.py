@@ -13,8 +13,6 @@ from utils.io import read_json
 from utils.model_dir import CFG_ARGS
 
 RECORD = "grid.json"
-# cfg_args entries that may differ between runs of one grid (paths, device, logging, restart flags)
-NOT_COMPARED = {"source_path", "model_path", "device", "quiet", "resume", "overwrite"}
 # train.py config field -> the grid flag that sets it
 SCALE_FLAGS = "--iter_scale / --stage_scale"
 GRID_FLAG = {"resolution": "--resolution", "num_random_points": "--num_points", "iterations": SCALE_FLAGS,
@@ -35,25 +33,19 @@ def check_flags(cfg: GridConfig, specs: list[JobSpec]) -> None:
     if not started:
         return
     # imported here: torch and the selectors load only when some run has started (grid.py stays quick otherwise)
-    from active.registry import list_selectors, selector_options
-    from training.config import parse_config  # the exact config train.py resolves from the same flags
-    any_selector_option = {o for m in list_selectors() for o in selector_options(m)}
+    from training.config import config_difference, parse_config  # the exact config train.py resolves
     for spec, run in started:
         saved = read_json(Path(spec.model_dir) / CFG_ARGS, missing="none", damaged="none")
         if saved is None:
             continue  # unreadable: train.py itself reports it
         expected = parse_config([*spec.train_args, "--device", "cpu"], notes=False).to_dict()
-        for group, values in expected.items():
-            for name, value in values.items():
-                if name in NOT_COMPARED or (name in any_selector_option
-                                            and name not in selector_options(run.method)):
-                    continue  # another selector's option: this run's method ignores it
-                old = saved.get(group, {}).get(name, value) if isinstance(saved.get(group), dict) else value
-                if old != value:
-                    flag = GRID_FLAG.get(name, "an extra train.py flag after --")
-                    raise UserError(f"{spec.model_dir} was trained with --{name} {_show(old)}, this grid asks for "
-                                    f"{_show(value)} (set by {flag}); use another --out, or the flags it was made "
-                                    "with (runs made with different flags are never mixed in one summary)")
+        difference = config_difference(saved, expected, run.method)
+        if difference:
+            name, old, value = difference
+            flag = GRID_FLAG.get(name, "an extra train.py flag after --")
+            raise UserError(f"{spec.model_dir} was trained with --{name} {_show(old)}, this grid asks for "
+                            f"{_show(value)} (set by {flag}); use another --out, or the flags it was made "
+                            "with (runs made with different flags are never mixed in one summary)")
 
 
 def _show(value: Any) -> str:

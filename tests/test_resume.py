@@ -1,5 +1,5 @@
 """A run killed (SIGKILL) in the middle of a stage resumes from its last checkpoint and ends exactly like an
-uninterrupted run with the same seed."""
+uninterrupted run with the same seed; resumed with other flags, it is refused."""
 import json
 import os
 import subprocess
@@ -27,6 +27,14 @@ def test_sigkill_then_resume_matches_uninterrupted(tiny_scene, tmp_path):
     assert proc.returncode != 0, "the run finished before it could be killed; make it longer"
     assert json.loads((killed / "run_status.json").read_text())["status"] == "running"
 
+    # resumed with another value of a flag that decides the run: refused, the run left as it was
+    other = [a if a != "lite_gs" else "pop_gs" for a in ARGS]
+    for flags, line in ((other, "--method lite_gs, this call has pop_gs"),
+                        ([*ARGS, "--eps", "0.3"], "--eps 0.1, this call has 0.3")):
+        r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(killed), *flags)
+        assert r.returncode == 2 and "Traceback" not in r.stderr and r.stderr.strip().splitlines()[-1] == (
+            f"error: {killed} was started with {line}: rerun it with the flags it started with to resume it (its "
+            "cfg_args), or pass --overwrite to start it again"), r.stderr
     r = run_cli("train.py", "-s", str(tiny_scene), "-m", str(killed), *ARGS)
     assert r.returncode == 0, r.stderr
     assert "resuming from iteration" in r.stdout

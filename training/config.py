@@ -9,7 +9,7 @@ from typing import Any
 import torch
 
 from active import Selector, build_selector_from, list_selectors
-from active.registry import selector_options_dataclass, unread_options_note
+from active.registry import selector_options, selector_options_dataclass, unread_options_note
 from arguments import ActiveConfig, ModelConfig, PipelineConfig, RunConfig, add_config_args, config_from_args, config_to_dict
 from scene.trained import raster_settings
 from training.densify import DensifyConfig
@@ -44,6 +44,27 @@ class TrainConfig:
 
     def to_dict(self) -> dict[str, Any]:
         return {name: config_to_dict(getattr(self, name)) for name, _, _ in CONFIG_GROUPS}
+
+
+# cfg_args entries that may differ between the starts of one run, or between the runs of one grid: paths, device,
+# logging, restart and checkpoint-keeping flags (none changes what is trained)
+NOT_COMPARED = frozenset({"source_path", "model_path", "device", "quiet", "resume", "overwrite", "keep_checkpoints"})
+
+
+def config_difference(saved: dict[str, Any], current: dict[str, Any], method: str) -> tuple[str, Any, Any] | None:
+    """The first field (name, saved value, current value) on which a run's recorded cfg_args (`saved`) and a config
+    (`current`, `TrainConfig.to_dict()`) differ; None if none. Skipped: NOT_COMPARED, the selector options `method`
+    does not read, and fields `saved` lacks (recorded before they existed)."""
+    options_of_others = {o for m in list_selectors() for o in selector_options(m)} - set(
+        selector_options(method) if method else [])
+    for group, values in current.items():
+        recorded = saved.get(group) if isinstance(saved.get(group), dict) else {}
+        for name, value in values.items():
+            if name in NOT_COMPARED or name in options_of_others or name not in recorded:
+                continue
+            if recorded[name] != value:
+                return name, recorded[name], value
+    return None
 
 
 def build_parser(description: str | None = None) -> argparse.ArgumentParser:

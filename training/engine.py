@@ -28,7 +28,7 @@ from scene.scene import Scene
 from scene.trained import background_color, raster_settings
 from training.acquisition import (acquire_views, allowed_views, candidate_views, check_memory_before_training,
                                   seed_views)
-from training.config import TrainConfig, default_model_path, make_selector, stage_selectors
+from training.config import TrainConfig, config_difference, default_model_path, make_selector, stage_selectors
 from training.optim import PositionLRSchedule
 from training.state import TrainState, capture_state, fresh_state, restore_state
 from training.step import mean_psnr, next_view, training_step
@@ -37,7 +37,7 @@ from utils import dir_lock
 from utils.checkpoint import RunDirectory
 from utils.errors import UserError
 from utils.io import read_json, write_json
-from utils.model_dir import INPUT_PLY, SELECTION
+from utils.model_dir import CFG_ARGS, INPUT_PLY, SELECTION
 from utils.provenance import session_record
 from utils.seeding import seed_everything, set_rng_state
 
@@ -121,6 +121,7 @@ def _open_run(cfg: TrainConfig, model_path: str) -> Run:
     rng = random.Random(cfg.run.seed)
     checkpoint = run_dir.latest_checkpoint()
     if checkpoint is not None:
+        check_resumed_with_own_flags(cfg, model_path)
         state = fresh_state(scene, cfg, [], plan.total_iterations)
         restore_state(state, checkpoint, cfg, scene)
         rng.setstate(checkpoint["train_rng"])
@@ -150,6 +151,17 @@ def _open_run(cfg: TrainConfig, model_path: str) -> Run:
     return Run(cfg, run_dir, scene, plan, selector, background_color(cfg.model), raster_settings(cfg.pipeline), state,
                rng, PositionLRSchedule.from_config(cfg.optim, scene.extent), sessions=sessions,
                stage_selectors=by_stage)
+
+
+def check_resumed_with_own_flags(cfg: TrainConfig, model_path: str) -> None:
+    """One `error:` line if an interrupted run is resumed with flags other than those it started with (cfg_args), so
+    that no run trains its stages, or picks its views, under two configurations."""
+    saved = read_json(Path(model_path) / CFG_ARGS, missing="none", damaged="none")
+    difference = config_difference(saved, cfg.to_dict(), cfg.active.method) if saved else None
+    if difference:
+        name, old, new = difference
+        raise UserError(f"{model_path} was started with --{name} {old}, this call has {new}: rerun it with the flags "
+                        "it started with to resume it (its cfg_args), or pass --overwrite to start it again")
 
 
 def previous_sessions(selection_path: Path) -> list[dict[str, Any]]:

@@ -36,6 +36,7 @@ SOURCES = [
     ("setup1_paper_stages_auto", "Setup 1, paper stage lengths, EPYC"),
     ("setup1_paper_stages_rstart", "Setup 1, paper stage lengths, seed views by seed, EPYC"),
     ("setup1_paper_stages_rstart_cover", "Setup 1, paper stage lengths, seed views by seed, EPYC"),
+    ("setup1_paper_stages_rstart_bonsai_sfm1207", "Setup 1, paper stage lengths, seed views by seed, SfM of 12-07, EPYC"),
     ("setup1_paper_stages_bonsai_3seeds", "Setup 1, paper stage lengths"),
     ("setup1_paper_stages_bonsai_1206", "Setup 1, paper stage lengths, SfM of 12-06"),
     ("setup1_paper_stages_builtin", "Setup 1, paper stage lengths"),

@@ -143,7 +143,8 @@ def test_the_cli_runs_one_round(tmp_path):
                 "--iters_per_view", "10", "--max_gaussians", "500", "--png", str(tmp_path / "psnr.png"),
                 "--elevation", "10,75", "--seed_start", "random", "--num_random_points", "700", timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "num_random_points=700" in (out / "coverage" / "seed0" / "model" / "cfg_args").read_text()
+    cfg = json.loads((out / "coverage" / "seed0" / "model" / "cfg_args").read_text())
+    assert cfg["model"]["num_random_points"] == 700  # --num_random_points reaches train.py
     for seed in (0, 1):  # each seed started from its own turned views
         frames = json.loads((out / "coverage" / f"seed{seed}" / "data" / "transforms_train.json").read_text())["frames"]
         centres = torch.tensor([[f["transform_matrix"][i][3] for i in range(3)] for f in frames[:3]],

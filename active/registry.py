@@ -46,6 +46,11 @@ def selector_options(name: str) -> list[str]:
     return [f.name for f in dataclasses.fields(config)] if config is not None else []
 
 
+def options_read_by(names: list[str]) -> set[str]:
+    """The selector options that at least one of the selectors `names` reads."""
+    return {option for name in names for option in selector_options(name)}
+
+
 def build_selector(name: str, **options: Any) -> Selector:
     """Instantiate a registered selector; an unknown name or option is a `UserError` listing the valid ones."""
     cls, config = _lookup(name)
@@ -73,7 +78,7 @@ def check_selector_options(values: Mapping[str, Any], names: list[str]) -> list[
         fields = [f for f in dataclasses.fields(config) if f.name in values]
         config(**{f.name: values[f.name] for f in fields})  # its __post_init__ raises the one-line UserError
         defaults.update((f.name, list(f.default) if isinstance(f.default, tuple) else f.default) for f in fields)
-    read = {option for name in names for option in selector_options(name)}
+    read = options_read_by(names)
     return sorted(o for o, default in defaults.items() if o not in read and values[o] != default)
 
 

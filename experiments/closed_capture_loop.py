@@ -98,7 +98,7 @@ def run_loop(method: str, seed: int, out: Path, args: argparse.Namespace) -> dic
     """One closed loop; writes out/loop.json when it has finished. A finished loop of the same flags is kept (an
     interrupted run resumes at its first unfinished loop), one of other flags is an error unless --overwrite."""
     done = out / "loop.json"
-    if done.is_file() and not getattr(args, "overwrite", False):
+    if done.is_file() and not args.overwrite:
         previous = read_json(done, fix="delete it to run the loop again")
         difference = protocol_difference(previous.get("settings", {}), vars(args))
         if difference:

@@ -11,7 +11,8 @@ training, so each method gives a PSNR-vs-views curve.
     python scripts/capture_loop.py --plot output/capture_loop --png docs/results/capture_loop/psnr_vs_views.png
 
 Each (method, seed) writes OUT/METHOD/seedS/loop.json when it finishes: per round the views, test PSNR and the seconds
-spent training and recommending; run again, the command keeps the loops finished with the same flags; OUT/summary.md tables the test PSNR per method and view count (mean +- std over seeds).
+spent training and recommending; run again, the command keeps the loops finished with the same flags; OUT/summary.md
+tables the test PSNR per method and view count (mean +- std over seeds).
 """
 from __future__ import annotations
 

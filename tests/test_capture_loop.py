@@ -11,12 +11,12 @@ import torch
 
 from experiments.closed_capture_loop import (FirstNoteOnly, capture, run_capture_loop, run_loop, start_positions,
                                              summary_table)
-from utils.errors import UserError
 from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions
 from scene.cameras import look_at
 from scene.frames import GL_TO_CV
 from scene.pose_files import read_pose_file
 from tests.conftest import ROOT, run_cli
+from utils.errors import UserError
 from utils.image import load_rgba
 
 

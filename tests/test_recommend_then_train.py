@@ -142,7 +142,6 @@ def test_an_output_folder_keeps_one_seed_start(tiny_scene, tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["results.json"]
 
 
-
 @pytest.mark.parametrize("flag, value, recorded", [("-k", "6", "--k 4"), ("--iterations", "900", "--iterations 1200"),
                                                    ("--train_args=--num_random_points 10000", None,
                                                     "--train_args --num_random_points 3000")])
@@ -162,6 +161,7 @@ def test_an_output_folder_keeps_one_protocol(tiny_scene, tmp_path, flag, value, 
     assert r.returncode == 2 and r.stderr.strip().splitlines()[-1].startswith(
         f"error: {out / 'results.json'} holds runs with {recorded}"), r.stderr
     assert sorted(p.name for p in out.iterdir()) == ["results.json"]
+
 
 @pytest.mark.slow
 def test_select_iteration_recommends_on_the_earlier_model_and_continues_from_the_last(tiny_scene, tmp_path):

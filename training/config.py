@@ -9,7 +9,7 @@ from typing import Any
 import torch
 
 from active import Selector, build_selector_from, list_selectors
-from active.registry import selector_options, selector_options_dataclass, unread_options_note
+from active.registry import options_read_by, selector_options_dataclass, unread_options_note
 from arguments import ActiveConfig, ModelConfig, PipelineConfig, RunConfig, add_config_args, config_from_args, config_to_dict
 from scene.trained import raster_settings
 from training.densify import DensifyConfig
@@ -55,8 +55,7 @@ def config_difference(saved: dict[str, Any], current: dict[str, Any], method: st
     """The first field (name, saved value, current value) on which a run's recorded cfg_args (`saved`) and a config
     (`current`, `TrainConfig.to_dict()`) differ; None if none. Skipped: NOT_COMPARED, the selector options `method`
     does not read, and fields `saved` lacks (recorded before they existed)."""
-    options_of_others = {o for m in list_selectors() for o in selector_options(m)} - set(
-        selector_options(method) if method else [])
+    options_of_others = options_read_by(list_selectors()) - options_read_by([method] if method else [])
     for group, values in current.items():
         recorded = saved.get(group) if isinstance(saved.get(group), dict) else {}
         for name, value in values.items():

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import torch
 
+from experiments.jobs import error_line
 from experiments.method_spec import selector_from_spec
 from recommender.outputs import write_outputs
 from recommender.pipeline import candidate_cameras, load_model, make_pool, recommend
@@ -69,7 +70,10 @@ def train(dataset: Path, model: Path, iterations: int, seed: int, max_gaussians:
            str(iterations), "--seed", str(seed), "--max_gaussians", str(max_gaussians), "--quiet", "--overwrite",
            "--num_random_points", str(num_random_points),
            "--densify_from_iter", "100", "--densification_interval", "50"]
-    subprocess.run(cmd, check=True, cwd=root, capture_output=True, text=True)
+    done = subprocess.run(cmd, cwd=root, capture_output=True, text=True)
+    if done.returncode != 0:
+        reason = error_line(done.stderr or done.stdout).removeprefix("error: ")
+        raise UserError(f"train.py failed on {dataset}: {reason}")
     return read_json(model / model_dir.RUN_STATUS)["test_psnr"]
 
 

@@ -74,6 +74,11 @@ def setup_mixed_sizes(tiny_scene, tmp):
     return ["train.py", "-s", str(scene), "-m", str(tmp / "m")], "one size"
 
 
+def setup_negative_random_points(tiny_scene, tmp):
+    return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), "--num_random_points", "-5"], \
+        "--num_random_points must be at least 1, got -5"
+
+
 def setup_bad_resolution(tiny_scene, tmp):
     return ["train.py", "-s", str(tiny_scene), "-m", str(tmp / "m"), "-r", "0"], "--resolution"
 

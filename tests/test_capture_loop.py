@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from experiments.closed_capture_loop import (FirstNoteOnly, capture, run_capture_loop, run_loop, start_positions,
-                                             summary_table)
+                                             summary_table, train)
 from scene.builtin import CAMERA_ANGLE_X, hemisphere_positions
 from scene.cameras import look_at
 from scene.frames import GL_TO_CV
@@ -117,6 +117,11 @@ def test_loops_of_other_flags_are_not_tabled_together(tmp_path):
     del record["settings"]["num_random_points"]
     old.write_text(json.dumps(record))
     assert "| random | 1 |" in summary_table(tmp_path)
+
+
+def test_a_failed_training_is_one_error_line_with_train_pys_reason(tmp_path):
+    with pytest.raises(UserError, match=r"^train.py failed on .*nope: --num_random_points must be at least 1, got -5$"):
+        train(tmp_path / "nope", tmp_path / "model", 10, 0, 500, -5)
 
 
 @pytest.mark.parametrize("folder", ["missing", "empty"])

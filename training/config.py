@@ -93,6 +93,8 @@ def validate_config(cfg: TrainConfig, notes: bool = True) -> None:
         raise UserError("no dataset given: pass -s/--source_path DIR (e.g. data/builtin, made by `python -m scene.builtin data/builtin`)")
     if cfg.run.iterations <= 0:
         raise UserError(f"--iterations must be positive, got {cfg.run.iterations}")
+    if cfg.model.num_random_points < 1:
+        raise UserError(f"--num_random_points must be at least 1, got {cfg.model.num_random_points}")
     if cfg.model.device == "cuda" and not torch.cuda.is_available():
         raise UserError("--device cuda was asked for but torch sees no CUDA device; use --device cpu")
     raster_settings(cfg.pipeline)  # a bad or unavailable --raster_backend fails before anything is written
